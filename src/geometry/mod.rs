@@ -1,0 +1,9 @@
+//! Geometry: contour polygons of deformed grains, their intersections with each other and with
+//! walls, and the broad phase that finds the candidate pairs.
+
+pub mod broadphase;
+pub mod contour;
+pub mod intersection;
+
+pub use contour::{ContourTable, GrainShape};
+pub use intersection::{ContactGeometry, Overlap, grain_grain, grain_wall};

@@ -1,0 +1,134 @@
+//! Linear constitutive laws on finite principal strains (paper eq. 39–46, 65–68).
+//!
+//! Stress and strain are tension positive. `lost_fraction` is the area a grain loses to its
+//! contacts, `sum_j S_j`, divided by its reference area `pi R^2`.
+
+use serde::{Deserialize, Serialize};
+
+/// Elastic, isotropic grain material.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// Young's modulus E (> 0).
+    pub young: f64,
+    /// Poisson's ratio nu, in [0, 0.5]; exactly 0.5 selects the incompressible law of SPEC §6.
+    pub poisson: f64,
+    /// Mass density rho (> 0), mass per unit area in 2D.
+    pub density: f64,
+}
+
+impl Material {
+    pub fn shear_modulus(&self) -> f64 {
+        self.young / (2.0 * (1.0 + self.poisson))
+    }
+
+    /// `kappa = E / (3 - 6 nu)` (paper eq. 46); infinite for nu = 0.5.
+    pub fn bulk_modulus(&self) -> f64 {
+        if self.is_incompressible() {
+            f64::INFINITY
+        } else {
+            self.young / (3.0 - 6.0 * self.poisson)
+        }
+    }
+
+    pub fn is_incompressible(&self) -> bool {
+        self.poisson >= 0.5
+    }
+
+    /// Stiffness of one principal-strain mode, `d sigma_1 / d eps_1 = mu + kappa` (mu alone when
+    /// incompressible: the volume is then enforced by the correction, not by a stiffness).
+    pub fn deformation_stiffness(&self) -> f64 {
+        if self.is_incompressible() {
+            self.shear_modulus()
+        } else {
+            self.shear_modulus() + self.bulk_modulus()
+        }
+    }
+}
+
+/// Volumetric strain of eq. 41: `(1+eps1)(1+eps2) - lost_fraction - 1`.
+#[inline]
+pub fn volumetric_strain(eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
+    (1.0 + eps1) * (1.0 + eps2) - lost_fraction - 1.0
+}
+
+/// Principal grain stresses (sigma_1, sigma_2), along e1 and e2.
+/// Compressible: `sigma_i = 2 mu eps_idev + kappa eps_V` (eq. 42–43 with eps1dev = -eps2dev);
+/// incompressible: `sigma_i = 2 mu eps_idev` (eq. 65–66).
+#[inline]
+pub fn principal_stress(
+    material: &Material,
+    eps1: f64,
+    eps2: f64,
+    lost_fraction: f64,
+) -> (f64, f64) {
+    let mu = material.shear_modulus();
+    let half_difference = 0.5 * (eps1 - eps2);
+    let (dev1, dev2) = (2.0 * mu * half_difference, -2.0 * mu * half_difference);
+    if material.is_incompressible() {
+        (dev1, dev2)
+    } else {
+        let pressure_part = material.bulk_modulus() * volumetric_strain(eps1, eps2, lost_fraction);
+        (dev1 + pressure_part, dev2 + pressure_part)
+    }
+}
+
+/// Strain energy per unit reference area: `mu (d1^2 + d2^2) + kappa/2 eps_V^2` (the deviatoric
+/// part alone when incompressible).
+#[inline]
+pub fn strain_energy_density(material: &Material, eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
+    let half_difference = 0.5 * (eps1 - eps2);
+    let deviatoric = 2.0 * material.shear_modulus() * half_difference * half_difference;
+    if material.is_incompressible() {
+        deviatoric
+    } else {
+        let ev = volumetric_strain(eps1, eps2, lost_fraction);
+        deviatoric + 0.5 * material.bulk_modulus() * ev * ev
+    }
+}
+
+/// The incompressibility correction of SPEC §6: keeps the deviatoric strains and returns the
+/// principal strains `(d1 + e/2, d2 + e/2)` for which the grain's current area
+/// `pi R^2 (1+eps1)(1+eps2) - sum S_j` equals its reference area `pi R^2`.
+/// With d2 = -d1 the root of eq. 68 simplifies to `e = 2 sqrt(1 + lost_fraction + d1^2) - 2`.
+#[inline]
+pub fn incompressible_strains(eps1: f64, eps2: f64, lost_fraction: f64) -> (f64, f64) {
+    let d1 = 0.5 * (eps1 - eps2);
+    let half_add = (1.0 + lost_fraction + d1 * d1).sqrt() - 1.0;
+    (d1 + half_add, -d1 + half_add)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn incompressible_correction_restores_the_reference_area() {
+        // Expectation (eq. 67): (1+eps1)(1+eps2) - lost = 1 after the correction, deviator kept.
+        for (e1, e2, lost) in [
+            (0.1, -0.2, 0.0),
+            (0.3, 0.25, 0.07),
+            (-0.4, 0.2, 0.15),
+            (0.0, 0.0, 0.3),
+        ] {
+            let (a, b) = incompressible_strains(e1, e2, lost);
+            assert!(((1.0 + a) * (1.0 + b) - lost - 1.0).abs() < 1e-14);
+            assert!(((a - b) - (e1 - e2)).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn uniaxial_plane_stress_like_check_of_lame_relations() {
+        // Expectation: for small strains, sigma_1 - sigma_2 = 2 mu (eps1 - eps2) / 2 * 2 and the
+        // mean stress = kappa eps_V.
+        let m = Material {
+            young: 1.0,
+            poisson: 0.3,
+            density: 1.0,
+        };
+        let (s1, s2) = principal_stress(&m, 1e-6, -2e-6, 0.0);
+        assert!(((s1 - s2) - 2.0 * m.shear_modulus() * 3e-6).abs() < 1e-18);
+        let ev = volumetric_strain(1e-6, -2e-6, 0.0);
+        assert!((0.5 * (s1 + s2) - m.bulk_modulus() * ev).abs() < 1e-18);
+    }
+}

@@ -1,0 +1,22 @@
+//! # sdem — the Soft Discrete Element Method in 2D
+//!
+//! Each grain is an ellipse with six degrees of freedom (x, y, rotation, two principal strains
+//! and their orientation). Contacts are found by intersecting contour polygons, the normal force
+//! follows the a/b secant law, the grain stress comes from its constitutive law and from the
+//! Love–Weber stress of its contact forces, and an explicit solver integrates it all.
+//!
+//! Conventions: 2D, consistent units (the shipped scenarios use E = 1, rho = 1); stress and
+//! strain are **tension positive** inside the library. Reports for users (CSV) state their sign
+//! in the column names.
+//!
+//! Layout: [`geometry`] (contours, intersections, broad phase), [`contact`] (laws),
+//! [`grain`] (state, constitutive laws), [`integration`] (the time step), [`boundary`] (walls,
+//! loading programs), [`sample`] (initial packings), [`scenario`] (RON input), [`output`]
+//! (measures and files), [`run`] (a scenario from start to end).
+
+pub mod boundary;
+pub mod contact;
+pub mod geometry;
+pub mod grain;
+pub mod integration;
+pub mod sample;
