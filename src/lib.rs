@@ -19,4 +19,7 @@ pub mod contact;
 pub mod geometry;
 pub mod grain;
 pub mod integration;
+pub mod output;
+pub mod run;
 pub mod sample;
+pub mod scenario;

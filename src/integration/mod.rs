@@ -394,7 +394,7 @@ impl World {
 }
 
 /// The sums a grain needs from its contacts.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 struct ContactLoad {
     force: DVec2,
     torque: f64,
@@ -403,6 +403,20 @@ struct ContactLoad {
     lost_area: f64,
     contacts: u32,
     wall_contacts: u32,
+}
+
+// Not derived: glam's `DMat2::default()` is the identity, and the moment sum must start at zero.
+impl Default for ContactLoad {
+    fn default() -> Self {
+        Self {
+            force: DVec2::ZERO,
+            torque: 0.0,
+            moment: DMat2::ZERO,
+            lost_area: 0.0,
+            contacts: 0,
+            wall_contacts: 0,
+        }
+    }
 }
 
 impl ContactLoad {

@@ -1,0 +1,225 @@
+//! A scenario from start to end: generate the sample, build the box, run the loading program,
+//! write the measures.
+
+use crate::boundary::loading::LoadingProgram;
+use crate::boundary::walls::box_walls;
+use crate::grain::Grain;
+use crate::integration::{Instability, World};
+use crate::output::{MacroWriter, Measures, write_grains_csv};
+use crate::sample::{self, SampleError};
+use crate::scenario::Scenario;
+use glam::DVec2;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Sample(#[from] SampleError),
+    #[error("writing {path}: {source}")]
+    Output {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{instability}\n  the last good state (step {last_good_step}) is in {state_file}")]
+    Unstable {
+        instability: Instability,
+        last_good_step: u64,
+        state_file: String,
+    },
+    #[error("could not start {threads} threads: {message}")]
+    Threads { threads: usize, message: String },
+}
+
+/// Where the sample jammed (SPEC §7): the first state with p_c above p_jam.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jamming {
+    pub step: u64,
+    pub phi: f64,
+    pub z: f64,
+    pub z_nr: f64,
+    pub p_c: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSummary {
+    pub grains: usize,
+    pub steps: u64,
+    pub dt: f64,
+    pub critical_dt: f64,
+    pub wall_seconds: f64,
+    pub jamming: Option<Jamming>,
+    pub last: Measures,
+    /// Largest inertial number seen once p_c > 1e-4 E.
+    pub max_loaded_inertial_number: f64,
+    pub neighbor_builds: u64,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    pub out_dir: PathBuf,
+    /// Print a progress line to stderr every this many seconds (None: silent).
+    pub progress_seconds: Option<f64>,
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
+    move |source| RunError::Output {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// Builds the world of a scenario: its generated sample at rest in its box.
+pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
+    let placed = sample::generate(&scenario.sample, scenario.seed)?;
+    let grains = placed
+        .iter()
+        .map(|p| Grain::at_rest(DVec2::new(p.x, p.y), p.radius))
+        .collect();
+    let walls = box_walls(
+        0.0,
+        scenario.sample.box_width,
+        0.0,
+        scenario.sample.box_height,
+    );
+    Ok(World::new(scenario.parameters(), grains, walls))
+}
+
+/// Runs a scenario to the end of its loading program, writing `macro.csv`, `grains.csv` and
+/// `summary.txt` in `options.out_dir`.
+pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSummary, RunError> {
+    let out = &options.out_dir;
+    std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let mut world = build_world(scenario)?;
+    let started = Instant::now();
+    let macro_path = out.join("macro.csv");
+    let mut writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;
+    let mut program = LoadingProgram::new(scenario.loading.clone(), &world.walls);
+    let mean_diameter =
+        2.0 * world.grains.iter().map(|g| g.radius).sum::<f64>() / world.grains.len() as f64;
+    let young = scenario.material.young;
+    let p_jam = scenario.output.jamming_pressure * young;
+    let every = scenario.output.every;
+    let mut jamming: Option<Jamming> = None;
+    let mut last_good = world.grains.clone();
+    let mut last_good_step = 0;
+    let mut max_loaded_inertial_number: f64 = 0.0;
+    let mut last_progress = Instant::now();
+    let mut last_row = Measures::of(&world, "start", 0.0, mean_diameter);
+
+    while !program.finished() {
+        let state = Measures::load_state(&world, jamming.is_some(), mean_diameter);
+        program.drive(&mut world.walls, &state);
+        let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
+        let rate = program.rate;
+        if let Err(instability) = world.step() {
+            let state_file = out.join("grains_last_good.csv");
+            let mut snapshot = world.clone();
+            snapshot.grains = last_good;
+            write_grains_csv(&state_file, &snapshot).map_err(io_error(&state_file))?;
+            return Err(RunError::Unstable {
+                instability,
+                last_good_step,
+                state_file: state_file.display().to_string(),
+            });
+        }
+        let state = Measures::load_state(&world, jamming.is_some(), mean_diameter);
+        let p_c = state.mean_stress();
+        let mut write_row = world.step % every == 0;
+        if p_c > 1e-4 * young {
+            max_loaded_inertial_number =
+                max_loaded_inertial_number.max(state.inertial_number(rate));
+        }
+        if jamming.is_none() && p_c > p_jam {
+            let (z, z_nr) = world.coordination();
+            jamming = Some(Jamming {
+                step: world.step,
+                phi: state.phi,
+                z,
+                z_nr,
+                p_c,
+            });
+            write_row = true;
+        }
+        let jammed = jamming.is_some();
+        let state = crate::boundary::loading::LoadState { jammed, ..state };
+        if program.advance(world.step, world.time, &world.walls, &state) {
+            write_row = true;
+        }
+        let limit_reached =
+            scenario.output.max_steps > 0 && world.step >= scenario.output.max_steps;
+        if write_row || program.finished() || limit_reached {
+            last_row = Measures::of(&world, phase_name, rate, mean_diameter);
+            writer.write(&last_row).map_err(io_error(&macro_path))?;
+            last_good.clone_from(&world.grains);
+            last_good_step = world.step;
+        }
+        if let Some(seconds) = options.progress_seconds
+            && last_progress.elapsed().as_secs_f64() >= seconds
+        {
+            last_progress = Instant::now();
+            let elapsed = started.elapsed().as_secs_f64();
+            eprintln!(
+                "step {:>9}  t {:.4e}  {:<10}  phi {:.4}  p_c {:.3e}  rate {:.2e}  contacts {}  {:.2e} grain-steps/s",
+                world.step,
+                world.time,
+                phase_name,
+                state.phi,
+                p_c,
+                rate,
+                world.totals.contacts,
+                world.step as f64 * world.grains.len() as f64 / elapsed
+            );
+        }
+        if limit_reached {
+            break;
+        }
+    }
+    let grains_path = out.join("grains.csv");
+    write_grains_csv(&grains_path, &world).map_err(io_error(&grains_path))?;
+    let summary = RunSummary {
+        grains: world.grains.len(),
+        steps: world.step,
+        dt: world.params.dt,
+        critical_dt: scenario.critical_time_step(),
+        wall_seconds: started.elapsed().as_secs_f64(),
+        jamming,
+        last: last_row,
+        max_loaded_inertial_number,
+        neighbor_builds: world.neighbors.builds,
+    };
+    let summary_path = out.join("summary.txt");
+    write_summary(&summary_path, scenario, &summary).map_err(io_error(&summary_path))?;
+    Ok(summary)
+}
+
+fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::Result<()> {
+    let mut f = std::fs::File::create(path)?;
+    writeln!(f, "scenario = {}", scenario.name)?;
+    writeln!(f, "grains = {}", s.grains)?;
+    writeln!(f, "steps = {}", s.steps)?;
+    writeln!(f, "dt = {:.6e}", s.dt)?;
+    writeln!(f, "critical_dt = {:.6e}", s.critical_dt)?;
+    writeln!(f, "wall_seconds = {:.3}", s.wall_seconds)?;
+    writeln!(
+        f,
+        "grain_steps_per_second = {:.4e}",
+        s.steps as f64 * s.grains as f64 / s.wall_seconds.max(1e-9)
+    )?;
+    if let Some(j) = &s.jamming {
+        writeln!(f, "jamming_step = {}", j.step)?;
+        writeln!(f, "phi_0 = {:.6}", j.phi)?;
+        writeln!(f, "z_0 = {:.4}", j.z)?;
+        writeln!(f, "z_nr_0 = {:.4}", j.z_nr)?;
+    }
+    writeln!(f, "final_phi = {:.6}", s.last.phi)?;
+    writeln!(f, "final_p_c = {:.6e}", s.last.p_c)?;
+    writeln!(
+        f,
+        "max_loaded_inertial_number = {:.4e}",
+        s.max_loaded_inertial_number
+    )?;
+    writeln!(f, "neighbor_builds = {}", s.neighbor_builds)?;
+    Ok(())
+}

@@ -1,0 +1,425 @@
+//! Scenario files (RON): what a run simulates, checked field by field before any work starts.
+//!
+//! A scenario names a sample to generate, the material, the model level, the contact and
+//! deformation numerics, the time step, a loading program and the output settings. Every
+//! section but `name`, `sample`, `material` and `loading` has defaults (the paper's values).
+
+use crate::boundary::loading::{Phase, StopWhen, StrainRate};
+use crate::contact::SecantLaw;
+use crate::grain::{Material, ModelLevel};
+use crate::integration::Parameters;
+use crate::integration::parameters::critical_time_step;
+use crate::sample::{RadiusDistribution, SampleError, SampleSpec};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    /// Seed of the sample generator.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    pub sample: SampleSpec,
+    pub material: Material,
+    #[serde(default)]
+    pub model: ModelLevel,
+    #[serde(default)]
+    pub contact: ContactSettings,
+    #[serde(default)]
+    pub deformation: DeformationSettings,
+    #[serde(default)]
+    pub time_step: TimeStep,
+    pub loading: Vec<Phase>,
+    #[serde(default)]
+    pub output: OutputSettings,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// What to do when a contact leaves the domain of the secant law (SPEC §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum DomainExitPolicy {
+    /// Stop the run with a diagnostic.
+    #[default]
+    Stop,
+    /// Hold the law's denominator at its floor and go on (reported in the output).
+    Cap,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ContactSettings {
+    /// Constant a of the secant law (paper: 0.58).
+    pub a: f64,
+    /// Constant b of the secant law (paper: 2).
+    pub b: f64,
+    /// Contour resolution dbeta in degrees (paper: 1).
+    pub resolution_deg: f64,
+    /// gamma of the contact dashpot (eq. 61), dimensionless.
+    pub damping: f64,
+    pub on_domain_exit: DomainExitPolicy,
+    /// Domain floor: the law is left when `a L_c + (b-1) delta_n <= floor a L_c`.
+    pub domain_floor: f64,
+    /// Verlet skin as a fraction of the mean radius.
+    pub skin: f64,
+}
+
+impl Default for ContactSettings {
+    fn default() -> Self {
+        Self {
+            a: 0.58,
+            b: 2.0,
+            resolution_deg: 1.0,
+            damping: 1.0,
+            on_domain_exit: DomainExitPolicy::Stop,
+            domain_floor: 0.05,
+            skin: 0.2,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DeformationSettings {
+    /// gamma of the deformation dashpots (eq. 62–64), 1/time (paper: 1 with E = rho = 1).
+    pub damping: f64,
+    /// k_alpha of eq. 60.
+    pub k_alpha: f64,
+    /// Mass scaling of M_alpha (1 = none; only licit for quasi-static runs).
+    pub alpha_mass_scale: f64,
+}
+
+impl Default for DeformationSettings {
+    fn default() -> Self {
+        Self {
+            damping: 1.0,
+            k_alpha: 1e-3,
+            alpha_mass_scale: 1.0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum TimeStep {
+    /// A fraction of the critical time step estimated for the smallest grain (SPEC §9).
+    FractionOfCritical(f64),
+    /// A fixed time step.
+    Fixed(f64),
+}
+
+impl Default for TimeStep {
+    fn default() -> Self {
+        TimeStep::FractionOfCritical(0.2)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputSettings {
+    /// A row of macro.csv every this many steps (and at every phase end and at jamming).
+    pub every: u64,
+    /// Jamming threshold p_jam as a fraction of E (SPEC §7).
+    pub jamming_pressure: f64,
+    /// Hard limit on the number of steps (0 = none).
+    pub max_steps: u64,
+}
+
+impl Default for OutputSettings {
+    fn default() -> Self {
+        Self {
+            every: 1000,
+            jamming_pressure: 1e-5,
+            max_steps: 0,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("cannot read scenario {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}:{column}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("scenario field `{field}` = {value}: must be {allowed}")]
+    Invalid {
+        field: String,
+        value: String,
+        allowed: String,
+    },
+    #[error(transparent)]
+    Sample(#[from] SampleError),
+}
+
+fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> ScenarioError {
+    ScenarioError::Invalid {
+        field: field.to_string(),
+        value: value.to_string(),
+        allowed: allowed.to_string(),
+    }
+}
+
+/// `value` must be finite and strictly positive.
+fn positive(field: &str, value: f64) -> Result<(), ScenarioError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, value, "a finite number > 0"))
+    }
+}
+
+fn non_negative(field: &str, value: f64) -> Result<(), ScenarioError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, value, "a finite number >= 0"))
+    }
+}
+
+impl Scenario {
+    /// Reads and validates a scenario file; returns it with the warnings it deserves.
+    pub fn load(path: &Path) -> Result<(Scenario, Vec<String>), ScenarioError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let scenario = Self::parse(&text, &path.display().to_string())?;
+        let warnings = scenario.validate()?;
+        Ok((scenario, warnings))
+    }
+
+    /// Parses RON text; errors carry the line and column.
+    pub fn parse(text: &str, path: &str) -> Result<Scenario, ScenarioError> {
+        ron::Options::default()
+            .from_str::<Scenario>(text)
+            .map_err(|e| ScenarioError::Parse {
+                path: path.to_string(),
+                line: e.span.start.line,
+                column: e.span.start.col,
+                message: e.code.to_string(),
+            })
+    }
+
+    /// Checks every field; returns warnings for legal but suspicious choices.
+    pub fn validate(&self) -> Result<Vec<String>, ScenarioError> {
+        let mut warnings = Vec::new();
+        self.sample.validate()?;
+        let m = &self.material;
+        positive("material.young", m.young)?;
+        positive("material.density", m.density)?;
+        if !(m.poisson.is_finite() && (0.0..=0.5).contains(&m.poisson)) {
+            return Err(invalid(
+                "material.poisson",
+                m.poisson,
+                "in [0, 0.5] (0.5 = incompressible)",
+            ));
+        }
+        if !m.is_incompressible() && m.poisson > 0.49 {
+            warnings.push(format!(
+                "material.poisson = {}: the bulk modulus is {:.1} E and the critical time step shrinks \
+                 with it; nu = 0.5 uses the incompressible law, which has no such cost",
+                m.poisson,
+                m.bulk_modulus() / m.young
+            ));
+        }
+        let c = &self.contact;
+        positive("contact.a", c.a)?;
+        positive("contact.b", c.b)?;
+        if !(c.resolution_deg.is_finite() && c.resolution_deg > 0.0 && c.resolution_deg <= 45.0) {
+            return Err(invalid(
+                "contact.resolution_deg",
+                c.resolution_deg,
+                "in (0, 45] degrees",
+            ));
+        }
+        non_negative("contact.damping", c.damping)?;
+        if !(c.domain_floor.is_finite() && c.domain_floor > 0.0 && c.domain_floor < 1.0) {
+            return Err(invalid("contact.domain_floor", c.domain_floor, "in (0, 1)"));
+        }
+        non_negative("contact.skin", c.skin)?;
+        let d = &self.deformation;
+        non_negative("deformation.damping", d.damping)?;
+        non_negative("deformation.k_alpha", d.k_alpha)?;
+        positive("deformation.alpha_mass_scale", d.alpha_mass_scale)?;
+        if c.damping == 0.0 {
+            warnings.push("contact.damping = 0: nothing dissipates energy at contacts; a compaction will not be quasi-static".into());
+        }
+        let critical = self.critical_time_step();
+        match self.time_step {
+            TimeStep::FractionOfCritical(f) => {
+                positive("time_step.FractionOfCritical", f)?;
+                if f > 1.0 {
+                    warnings.push(format!(
+                        "time_step = {f} x the critical estimate {critical:.3e}: expect an instability"
+                    ));
+                }
+            }
+            TimeStep::Fixed(dt) => {
+                positive("time_step.Fixed", dt)?;
+                if dt > critical {
+                    warnings.push(format!(
+                        "time_step = {dt:.3e} is above the critical estimate {critical:.3e} \
+                         (smallest grain, stiffest contact): expect an instability"
+                    ));
+                }
+            }
+        }
+        if self.loading.is_empty() {
+            return Err(invalid("loading", "[]", "a list of at least one phase"));
+        }
+        for (k, phase) in self.loading.iter().enumerate() {
+            let field = format!("loading[{k}]");
+            match phase {
+                Phase::Isotropic { rate, until } | Phase::Oedometric { rate, until } => {
+                    validate_rate(&format!("{field}.rate"), rate, &mut warnings)?;
+                    validate_until(&format!("{field}.until"), until)?;
+                }
+                Phase::Servo {
+                    sxx,
+                    syy,
+                    gain,
+                    max_rate,
+                    until,
+                } => {
+                    non_negative(&format!("{field}.sxx"), *sxx)?;
+                    non_negative(&format!("{field}.syy"), *syy)?;
+                    positive(&format!("{field}.gain"), *gain)?;
+                    positive(&format!("{field}.max_rate"), *max_rate)?;
+                    validate_until(&format!("{field}.until"), until)?;
+                }
+                Phase::Relax { until } => validate_until(&format!("{field}.until"), until)?,
+            }
+        }
+        if self.output.every == 0 {
+            return Err(invalid("output.every", 0, "at least 1 step"));
+        }
+        positive("output.jamming_pressure", self.output.jamming_pressure)?;
+        Ok(warnings)
+    }
+
+    pub fn critical_time_step(&self) -> f64 {
+        critical_time_step(
+            &self.material,
+            &self.secant_law(),
+            smallest_radius(&self.sample.radii),
+            self.model,
+        )
+    }
+
+    pub fn time_step_value(&self) -> f64 {
+        match self.time_step {
+            TimeStep::FractionOfCritical(f) => f * self.critical_time_step(),
+            TimeStep::Fixed(dt) => dt,
+        }
+    }
+
+    pub fn secant_law(&self) -> SecantLaw {
+        SecantLaw {
+            young: self.material.young,
+            a: self.contact.a,
+            b: self.contact.b,
+            floor: self.contact.domain_floor,
+            cap: self.contact.on_domain_exit == DomainExitPolicy::Cap,
+        }
+    }
+
+    /// The engine parameters this scenario asks for.
+    pub fn parameters(&self) -> Parameters {
+        Parameters {
+            material: self.material,
+            level: self.model,
+            law: self.secant_law(),
+            resolution_deg: self.contact.resolution_deg,
+            contact_damping: self.contact.damping,
+            deformation_damping: self.deformation.damping,
+            k_alpha: self.deformation.k_alpha,
+            alpha_mass_scale: self.deformation.alpha_mass_scale,
+            dt: self.time_step_value(),
+            skin_fraction: self.contact.skin,
+        }
+    }
+}
+
+/// Smallest radius a distribution can produce (the critical time step is set by it).
+fn smallest_radius(radii: &RadiusDistribution) -> f64 {
+    match *radii {
+        RadiusDistribution::Gaussian { min, .. }
+        | RadiusDistribution::Fractal { min, .. }
+        | RadiusDistribution::Uniform { min, .. } => min,
+        RadiusDistribution::Monodisperse { radius } => radius,
+    }
+}
+
+fn validate_rate(
+    field: &str,
+    rate: &StrainRate,
+    warnings: &mut Vec<String>,
+) -> Result<(), ScenarioError> {
+    match rate {
+        StrainRate::Constant(r) => {
+            if !r.is_finite() {
+                return Err(invalid(field, r, "a finite strain rate"));
+            }
+        }
+        StrainRate::QuasiStatic {
+            inertial_number,
+            max,
+            fast,
+            fast_until_phi,
+        } => {
+            positive(&format!("{field}.inertial_number"), *inertial_number)?;
+            positive(&format!("{field}.max"), *max)?;
+            positive(&format!("{field}.fast"), *fast)?;
+            if !(fast_until_phi.is_finite() && *fast_until_phi >= 0.0 && *fast_until_phi <= 1.0) {
+                return Err(invalid(
+                    &format!("{field}.fast_until_phi"),
+                    fast_until_phi,
+                    "in [0, 1]",
+                ));
+            }
+            if *inertial_number > 1e-3 {
+                warnings.push(format!(
+                    "{field}.inertial_number = {inertial_number}: above 1e-3 the compaction is not quasi-static (SPEC §7)"
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
+    match until {
+        StopWhen::PackingFraction(phi) => {
+            if !(phi.is_finite() && *phi > 0.0 && *phi < 1.0) {
+                return Err(invalid(field, phi, "a packing fraction in (0, 1)"));
+            }
+        }
+        StopWhen::MeanStress(p) => positive(field, *p)?,
+        StopWhen::Time(t) => positive(field, *t)?,
+        StopWhen::Strain(e) => {
+            if !(e.is_finite() && *e > 0.0 && *e < 1.0) {
+                return Err(invalid(field, e, "a strain in (0, 1)"));
+            }
+        }
+        StopWhen::Steps(_) | StopWhen::Jammed => {}
+        StopWhen::Any(list) => {
+            if list.is_empty() {
+                return Err(invalid(field, "Any([])", "at least one condition"));
+            }
+            for (k, u) in list.iter().enumerate() {
+                validate_until(&format!("{field}[{k}]"), u)?;
+            }
+        }
+    }
+    Ok(())
+}
