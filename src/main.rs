@@ -99,6 +99,12 @@ fn main() -> Result<()> {
                     j.step, j.phi, j.z, j.z_nr
                 );
             }
+            if let Some((rms, n)) = summary.eq69_rms_error {
+                eprintln!(
+                    "eq. 69 (Cantor et al. 2020) with this run's phi_0, Z_0: RMS relative error {:.1}% over {n} rows",
+                    100.0 * rms
+                );
+            }
             eprintln!(
                 "final: phi = {:.4}, p_c = {:.4e}; see {}",
                 summary.last.phi,

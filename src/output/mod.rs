@@ -5,6 +5,7 @@
 
 pub mod files;
 pub mod measures;
+pub mod reference;
 
 pub use files::{MacroWriter, write_grains_csv};
 pub use measures::Measures;

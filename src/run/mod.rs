@@ -5,6 +5,7 @@ use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::box_walls;
 use crate::grain::Grain;
 use crate::integration::{Instability, World};
+use crate::output::reference::CantorReference;
 use crate::output::{MacroWriter, Measures, write_grains_csv};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
@@ -54,6 +55,9 @@ pub struct RunSummary {
     /// Largest inertial number seen once p_c > 1e-4 E.
     pub max_loaded_inertial_number: f64,
     pub neighbor_builds: u64,
+    /// For nu = 0.5: RMS relative error of p_c(phi) against eq. 69 with the run's own phi_0 and
+    /// Z_0 (= z_nr at jamming), over phi in [phi_0 + 0.01, final phi], and the number of rows.
+    pub eq69_rms_error: Option<(f64, usize)>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -101,15 +105,18 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     let young = scenario.material.young;
     let p_jam = scenario.output.jamming_pressure * young;
     let every = scenario.output.every;
-    let mut jamming: Option<Jamming> = None;
+    let mut confirmed_jamming: Option<Jamming> = None;
+    let mut candidate: Option<Jamming> = None;
     let mut last_good = world.grains.clone();
     let mut last_good_step = 0;
     let mut max_loaded_inertial_number: f64 = 0.0;
     let mut last_progress = Instant::now();
     let mut last_row = Measures::of(&world, "start", 0.0, mean_diameter);
+    // (phi, p_c) of the rows written in isotropic phases, for the eq. 69 comparison.
+    let mut isotropic_curve: Vec<(f64, f64)> = Vec::new();
 
     while !program.finished() {
-        let state = Measures::load_state(&world, jamming.is_some(), mean_diameter);
+        let state = Measures::load_state(&world, confirmed_jamming.is_some(), mean_diameter);
         program.drive(&mut world.walls, &state);
         let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
         let rate = program.rate;
@@ -124,24 +131,37 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
                 state_file: state_file.display().to_string(),
             });
         }
-        let state = Measures::load_state(&world, jamming.is_some(), mean_diameter);
+        let state = Measures::load_state(&world, confirmed_jamming.is_some(), mean_diameter);
         let p_c = state.mean_stress();
         let mut write_row = world.step % every == 0;
         if p_c > 1e-4 * young {
             max_loaded_inertial_number =
                 max_loaded_inertial_number.max(state.inertial_number(rate));
         }
-        if jamming.is_none() && p_c > p_jam {
-            let (z, z_nr) = world.coordination();
-            jamming = Some(Jamming {
-                step: world.step,
-                phi: state.phi,
-                z,
-                z_nr,
-                p_c,
-            });
-            write_row = true;
+        // Jamming (SPEC §7) is the first state with p_c > p_jam that carries on: a collision
+        // in the loose gas can lift p_c over p_jam for a few steps, so a candidate is only
+        // confirmed once p_c has stayed above p_jam for `every` steps.
+        if confirmed_jamming.is_none() {
+            match candidate {
+                None if p_c > p_jam => {
+                    let (z, z_nr) = world.coordination();
+                    candidate = Some(Jamming {
+                        step: world.step,
+                        phi: state.phi,
+                        z,
+                        z_nr,
+                        p_c,
+                    });
+                }
+                Some(_) if p_c <= p_jam => candidate = None,
+                Some(c) if world.step >= c.step + every => {
+                    confirmed_jamming = candidate;
+                    write_row = true;
+                }
+                _ => {}
+            }
         }
+        let jamming = confirmed_jamming;
         let jammed = jamming.is_some();
         let state = crate::boundary::loading::LoadState { jammed, ..state };
         if program.advance(world.step, world.time, &world.walls, &state) {
@@ -151,6 +171,9 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
             scenario.output.max_steps > 0 && world.step >= scenario.output.max_steps;
         if write_row || program.finished() || limit_reached {
             last_row = Measures::of(&world, phase_name, rate, mean_diameter);
+            if phase_name == "isotropic" {
+                isotropic_curve.push((last_row.phi, last_row.p_c));
+            }
             writer.write(&last_row).map_err(io_error(&macro_path))?;
             last_good.clone_from(&world.grains);
             last_good_step = world.step;
@@ -178,7 +201,17 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     }
     let grains_path = out.join("grains.csv");
     write_grains_csv(&grains_path, &world).map_err(io_error(&grains_path))?;
+    let jamming = confirmed_jamming;
+    let eq69_rms_error = match jamming {
+        Some(j) if scenario.material.is_incompressible() => {
+            let reference = CantorReference::new(j.phi, j.z_nr);
+            let phi_high = isotropic_curve.iter().map(|p| p.0).fold(0.0, f64::max);
+            reference.rms_relative_error(&isotropic_curve, young, j.phi + 0.01, phi_high)
+        }
+        _ => None,
+    };
     let summary = RunSummary {
+        eq69_rms_error,
         grains: world.grains.len(),
         steps: world.step,
         dt: world.params.dt,
@@ -221,5 +254,9 @@ fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::R
         s.max_loaded_inertial_number
     )?;
     writeln!(f, "neighbor_builds = {}", s.neighbor_builds)?;
+    if let Some((rms, n)) = s.eq69_rms_error {
+        writeln!(f, "eq69_rms_relative_error = {rms:.4}")?;
+        writeln!(f, "eq69_points = {n}")?;
+    }
     Ok(())
 }
