@@ -34,6 +34,20 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree).
+    Bench {
+        /// Number of grains (rounded up to full lattice rows).
+        #[arg(long, default_value_t = 10_000)]
+        grains: usize,
+        /// Timed steps (after 20 warm-up steps).
+        #[arg(long, default_value_t = 200)]
+        steps: u64,
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Contour resolution dbeta in degrees.
+        #[arg(long, default_value_t = 1.0)]
+        resolution: f64,
+    },
     /// Check a scenario file and print its warnings and derived settings, without running it.
     Check { scenario: PathBuf },
 }
@@ -57,8 +71,18 @@ fn load(path: &PathBuf) -> Result<Scenario> {
     Ok(scenario)
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // One readable chain of causes; no backtrace for a user's mistake.
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run {
             scenario,
@@ -111,6 +135,31 @@ fn main() -> Result<()> {
                 summary.last.p_c,
                 out_dir.join("macro.csv").display()
             );
+        }
+        Command::Bench {
+            grains,
+            steps,
+            threads,
+            resolution,
+        } => {
+            if grains < 4 || steps == 0 {
+                bail!("--grains must be at least 4 and --steps at least 1");
+            }
+            let pool = thread_pool(threads)?;
+            let result = pool.install(|| {
+                let mut world = sdem::run::bench::dense_packing(grains, resolution);
+                sdem::run::bench::run_bench(&mut world, 20, steps)
+            })?;
+            println!(
+                "grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  seconds: {:.3}",
+                result.grains,
+                result.steps,
+                pool.current_num_threads(),
+                result.phi,
+                2.0 * result.contacts as f64 / result.grains as f64,
+                result.seconds
+            );
+            println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
         }
         Command::Check { scenario } => {
             let parsed = load(&scenario)?;

@@ -1,6 +1,8 @@
 //! A scenario from start to end: generate the sample, build the box, run the loading program,
 //! write the measures.
 
+pub mod bench;
+
 use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::box_walls;
 use crate::grain::Grain;

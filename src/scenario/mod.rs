@@ -10,7 +10,7 @@ use crate::grain::{Material, ModelLevel};
 use crate::integration::Parameters;
 use crate::integration::parameters::critical_time_step;
 use crate::sample::{RadiusDistribution, SampleError, SampleSpec};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -30,6 +30,7 @@ pub struct Scenario {
     pub deformation: DeformationSettings,
     #[serde(default)]
     pub time_step: TimeStep,
+    #[serde(deserialize_with = "strict::loading")]
     pub loading: Vec<Phase>,
     #[serde(default)]
     pub output: OutputSettings,
@@ -139,16 +140,22 @@ impl Default for OutputSettings {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    #[error("cannot read scenario {path}: {source}")]
+    /// The file could not be read. The reason is the error's `source`, not repeated in its
+    /// message (anyhow prints the chain: `{:#}` as `...: reason`).
+    #[error("cannot read scenario {path}")]
     Io {
         path: String,
         source: std::io::Error,
     },
+    /// Malformed RON, an unknown or missing field, a value of the wrong type.
     #[error("{path}:{line}:{column}: {message}")]
     Parse {
         path: String,
+        /// 1-based line of the offending token.
         line: usize,
+        /// 1-based column (in characters) of the offending token.
         column: usize,
+        /// The parser's message, followed by the offending line with a caret under `column`.
         message: String,
     },
     #[error("scenario field `{field}` = {value}: must be {allowed}")]
@@ -169,12 +176,22 @@ fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> Scenari
     }
 }
 
+/// A number as a user wrote it: plain for ordinary magnitudes, in exponent form (`1e-200`)
+/// where the plain form would run to dozens of digits.
+fn num(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || (1e-5..1e16).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// `value` must be finite and strictly positive.
 fn positive(field: &str, value: f64) -> Result<(), ScenarioError> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(invalid(field, value, "a finite number > 0"))
+        Err(invalid(field, num(value), "a finite number > 0"))
     }
 }
 
@@ -182,7 +199,7 @@ fn non_negative(field: &str, value: f64) -> Result<(), ScenarioError> {
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(invalid(field, value, "a finite number >= 0"))
+        Err(invalid(field, num(value), "a finite number >= 0"))
     }
 }
 
@@ -198,21 +215,38 @@ impl Scenario {
         Ok((scenario, warnings))
     }
 
-    /// Parses RON text; errors carry the line and column.
+    /// Parses RON text; errors carry the line and column of the offending token and quote its
+    /// line.
     pub fn parse(text: &str, path: &str) -> Result<Scenario, ScenarioError> {
         ron::Options::default()
             .from_str::<Scenario>(text)
-            .map_err(|e| ScenarioError::Parse {
-                path: path.to_string(),
-                line: e.span.start.line,
-                column: e.span.start.col,
-                message: e.code.to_string(),
+            .map_err(|e| {
+                let (line, column) = token_start(text, e.span.start, e.span.end);
+                ScenarioError::Parse {
+                    path: path.to_string(),
+                    line,
+                    column,
+                    message: format!("{}{}", e.code, excerpt(text, line, column)),
+                }
             })
     }
 
     /// Checks every field; returns warnings for legal but suspicious choices.
     pub fn validate(&self) -> Result<Vec<String>, ScenarioError> {
         let mut warnings = Vec::new();
+        if self.name.trim().is_empty()
+            || self.name == "."
+            || self.name == ".."
+            || self.name.contains(['/', '\\'])
+            || self.name.chars().any(char::is_control)
+        {
+            return Err(invalid(
+                "name",
+                format!("{:?}", self.name),
+                "a non-empty name without path separators (it names the default output folder \
+                 out/<name>)",
+            ));
+        }
         self.sample.validate()?;
         let m = &self.material;
         positive("material.young", m.young)?;
@@ -220,7 +254,7 @@ impl Scenario {
         if !(m.poisson.is_finite() && (0.0..=0.5).contains(&m.poisson)) {
             return Err(invalid(
                 "material.poisson",
-                m.poisson,
+                num(m.poisson),
                 "in [0, 0.5] (0.5 = incompressible)",
             ));
         }
@@ -238,13 +272,17 @@ impl Scenario {
         if !(c.resolution_deg.is_finite() && c.resolution_deg > 0.0 && c.resolution_deg <= 45.0) {
             return Err(invalid(
                 "contact.resolution_deg",
-                c.resolution_deg,
+                num(c.resolution_deg),
                 "in (0, 45] degrees",
             ));
         }
         non_negative("contact.damping", c.damping)?;
         if !(c.domain_floor.is_finite() && c.domain_floor > 0.0 && c.domain_floor < 1.0) {
-            return Err(invalid("contact.domain_floor", c.domain_floor, "in (0, 1)"));
+            return Err(invalid(
+                "contact.domain_floor",
+                num(c.domain_floor),
+                "in (0, 1)",
+            ));
         }
         non_negative("contact.skin", c.skin)?;
         let d = &self.deformation;
@@ -273,6 +311,24 @@ impl Scenario {
                     ));
                 }
             }
+        }
+        // Extreme but individually legal values (tiny radii, huge E / rho) can make the
+        // critical estimate, and with it the time step, 0 or non-finite.
+        let dt = self.time_step_value();
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(invalid(
+                "time_step",
+                format!("{:?} (dt = {})", self.time_step, num(dt)),
+                &format!(
+                    "a time step that is finite and > 0; the critical estimate is {} for the \
+                     smallest radius {} with material.young = {} and material.density = {}: \
+                     rescale the material or sample.radii",
+                    num(critical),
+                    num(smallest_radius(&self.sample.radii)),
+                    num(m.young),
+                    num(m.density)
+                ),
+            ));
         }
         if self.loading.is_empty() {
             return Err(invalid("loading", "[]", "a list of at least one phase"));
@@ -350,6 +406,54 @@ impl Scenario {
     }
 }
 
+/// Position of the offending token: ron's span may start on the blank before it.
+fn token_start(
+    text: &str,
+    start: ron::error::Position,
+    end: ron::error::Position,
+) -> (usize, usize) {
+    let (line, mut column) = (start.line, start.col);
+    if let Some(src) = text.lines().nth(line.saturating_sub(1)) {
+        let chars: Vec<char> = src.chars().collect();
+        while (line, column) < (end.line, end.col)
+            && matches!(chars.get(column.saturating_sub(1)), Some(' ' | '\t'))
+        {
+            column += 1;
+        }
+    }
+    (line, column)
+}
+
+/// The source line `line` (1-based) and a caret under `column`, for a parse error; long lines
+/// are cut to a window around the column.
+fn excerpt(text: &str, line: usize, column: usize) -> String {
+    const WIDTH: usize = 100;
+    let Some(src) = text.lines().nth(line.saturating_sub(1)) else {
+        return String::new();
+    };
+    let chars: Vec<char> = src.chars().collect();
+    let caret = column.saturating_sub(1).min(chars.len());
+    let (from, to) = if chars.len() <= WIDTH {
+        (0, chars.len())
+    } else {
+        let from = caret.saturating_sub(WIDTH / 2).min(chars.len() - WIDTH);
+        (from, from + WIDTH)
+    };
+    let head = if from > 0 { "..." } else { "" };
+    let tail = if to < chars.len() { "..." } else { "" };
+    let shown: String = chars[from..to].iter().collect();
+    let pad: String = std::iter::repeat_n(' ', head.len())
+        .chain(
+            chars[from..caret]
+                .iter()
+                .map(|&c| if c == '\t' { '\t' } else { ' ' }),
+        )
+        .collect();
+    let number = line.to_string();
+    let gutter = " ".repeat(number.len());
+    format!("\n {number} | {head}{shown}{tail}\n {gutter} | {pad}^")
+}
+
 /// Smallest radius a distribution can produce (the critical time step is set by it).
 fn smallest_radius(radii: &RadiusDistribution) -> f64 {
     match *radii {
@@ -368,7 +472,7 @@ fn validate_rate(
     match rate {
         StrainRate::Constant(r) => {
             if !r.is_finite() {
-                return Err(invalid(field, r, "a finite strain rate"));
+                return Err(invalid(field, num(*r), "a finite strain rate"));
             }
         }
         StrainRate::QuasiStatic {
@@ -383,7 +487,7 @@ fn validate_rate(
             if !(fast_until_phi.is_finite() && *fast_until_phi >= 0.0 && *fast_until_phi <= 1.0) {
                 return Err(invalid(
                     &format!("{field}.fast_until_phi"),
-                    fast_until_phi,
+                    num(*fast_until_phi),
                     "in [0, 1]",
                 ));
             }
@@ -401,14 +505,14 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
     match until {
         StopWhen::PackingFraction(phi) => {
             if !(phi.is_finite() && *phi > 0.0 && *phi < 1.0) {
-                return Err(invalid(field, phi, "a packing fraction in (0, 1)"));
+                return Err(invalid(field, num(*phi), "a packing fraction in (0, 1)"));
             }
         }
         StopWhen::MeanStress(p) => positive(field, *p)?,
         StopWhen::Time(t) => positive(field, *t)?,
         StopWhen::Strain(e) => {
             if !(e.is_finite() && *e > 0.0 && *e < 1.0) {
-                return Err(invalid(field, e, "a strain in (0, 1)"));
+                return Err(invalid(field, num(*e), "a strain in (0, 1)"));
             }
         }
         StopWhen::Steps(_) | StopWhen::Jammed => {}
@@ -422,4 +526,63 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
         }
     }
     Ok(())
+}
+
+/// Strict reading of the loading program. `Phase` and `StrainRate` (in `boundary::loading`) do not
+/// deny unknown fields, so a misspelt or extra field in a phase would be ignored without a word;
+/// these remote definitions mirror them with `deny_unknown_fields`. The derived `Serialize` is
+/// never called: its exhaustive match makes the build fail when a variant is added to `Phase` or
+/// `StrainRate` without being mirrored here (a new field fails in the derived `Deserialize`).
+mod strict {
+    use super::{Deserialize, Deserializer, Phase, Serialize, StopWhen, StrainRate};
+
+    #[allow(dead_code)]
+    #[derive(Serialize, Deserialize)]
+    #[serde(remote = "Phase", rename = "Phase", deny_unknown_fields)]
+    enum PhaseDef {
+        Isotropic {
+            #[serde(with = "StrainRateDef")]
+            rate: StrainRate,
+            until: StopWhen,
+        },
+        Oedometric {
+            #[serde(with = "StrainRateDef")]
+            rate: StrainRate,
+            until: StopWhen,
+        },
+        Servo {
+            sxx: f64,
+            syy: f64,
+            gain: f64,
+            max_rate: f64,
+            until: StopWhen,
+        },
+        Relax {
+            until: StopWhen,
+        },
+    }
+
+    #[allow(dead_code)]
+    #[derive(Serialize, Deserialize)]
+    #[serde(remote = "StrainRate", rename = "StrainRate", deny_unknown_fields)]
+    enum StrainRateDef {
+        Constant(f64),
+        QuasiStatic {
+            inertial_number: f64,
+            max: f64,
+            fast: f64,
+            fast_until_phi: f64,
+        },
+    }
+
+    #[derive(Deserialize)]
+    #[serde(transparent)]
+    struct StrictPhase(#[serde(with = "PhaseDef")] Phase);
+
+    pub(super) fn loading<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Vec<Phase>, D::Error> {
+        let phases = Vec::<StrictPhase>::deserialize(deserializer)?;
+        Ok(phases.into_iter().map(|p| p.0).collect())
+    }
 }
