@@ -32,11 +32,15 @@ fn small_isotropic_compaction_jams_and_reports() {
     let text = std::fs::read_to_string(out.join("macro.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    for column in ["step", "time", "phi", "sxx_c", "syy_c", "p_c", "q_c", "z", "z_nr"] {
+    for column in [
+        "step", "time", "phi", "sxx_c", "syy_c", "p_c", "q_c", "z", "z_nr",
+    ] {
         assert!(header.contains(&column), "missing column {column}");
     }
     let phi_col = header.iter().position(|c| *c == "phi").unwrap();
-    let phis: Vec<f64> = lines.map(|l| l.split(',').nth(phi_col).unwrap().parse().unwrap()).collect();
+    let phis: Vec<f64> = lines
+        .map(|l| l.split(',').nth(phi_col).unwrap().parse().unwrap())
+        .collect();
     assert!(phis.len() > 10);
     // Incompressible grains keep their areas, so phi only grows as the box shrinks.
     assert!(phis.windows(2).all(|w| w[1] >= w[0] - 1e-9));
@@ -44,7 +48,9 @@ fn small_isotropic_compaction_jams_and_reports() {
     // Frictionless discs jam at or below random close packing (~0.84). This compaction is fast
     // (inertial number ~0.04 at p_jam, to keep the test short), which jams a small sample
     // dynamically well below it; the quasi-static validation is in tests/validation.rs.
-    let jam = summary.jamming.expect("the sample must jam before phi = 0.86");
+    let jam = summary
+        .jamming
+        .expect("the sample must jam before phi = 0.86");
     assert!(jam.phi > 0.65 && jam.phi < 0.85, "phi_0 = {}", jam.phi);
     assert!(summary.last.p_c > 1e-3, "p_c = {}", summary.last.p_c);
     assert!(summary.eq69_rms_error.is_some());

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 /// How fast the walls move during a strain-driven phase.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum StrainRate {
     /// A fixed strain rate (1/time).
     Constant(f64),
@@ -45,6 +46,7 @@ pub enum StopWhen {
 
 /// One phase of a loading program.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum Phase {
     /// All four walls move inward at the same strain rate.
     Isotropic { rate: StrainRate, until: StopWhen },

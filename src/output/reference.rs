@@ -31,14 +31,21 @@ impl CantorReference {
     /// Mean stress (compression positive) at packing fraction `phi` (>= phi0).
     pub fn mean_stress(&self, phi: f64, young: f64) -> f64 {
         let excess = (phi - self.phi0).max(0.0);
-        -young * (self.b * phi / (2.0 * PI))
+        -young
+            * (self.b * phi / (2.0 * PI))
             * (self.z0 + self.k * excess.powf(self.a))
             * ((self.phi_max - phi) / (self.phi_max - self.phi0)).ln()
     }
 
     /// Root-mean-square relative error of measured (phi, p) points against the reference, over
     /// the points with phi in `[phi_low, phi_high]`; `None` when no point falls there.
-    pub fn rms_relative_error(&self, points: &[(f64, f64)], young: f64, phi_low: f64, phi_high: f64) -> Option<(f64, usize)> {
+    pub fn rms_relative_error(
+        &self,
+        points: &[(f64, f64)],
+        young: f64,
+        phi_low: f64,
+        phi_high: f64,
+    ) -> Option<(f64, usize)> {
         let errors: Vec<f64> = points
             .iter()
             .filter(|(phi, _)| *phi >= phi_low && *phi <= phi_high)
@@ -64,7 +71,8 @@ mod tests {
         let r = CantorReference::new(0.833, 4.2);
         assert_eq!(r.mean_stress(0.833, 1.0), 0.0);
         // Hand value: phi = 0.95, A: 0.12*0.95/2pi * (4.2 + 5.1 sqrt(0.117)) * -ln(0.05/0.167).
-        let expected = 0.12 * 0.95 / (2.0 * PI) * (4.2 + 5.1 * 0.117f64.sqrt()) * -(0.05f64 / 0.167).ln();
+        let expected =
+            0.12 * 0.95 / (2.0 * PI) * (4.2 + 5.1 * 0.117f64.sqrt()) * -(0.05f64 / 0.167).ln();
         assert!((r.mean_stress(0.95, 1.0) - expected).abs() < 1e-12);
         assert!(r.mean_stress(0.999, 1.0) > r.mean_stress(0.95, 1.0));
     }
@@ -72,7 +80,10 @@ mod tests {
     #[test]
     fn rms_of_the_reference_itself_is_zero() {
         let r = CantorReference::new(0.85, 4.0);
-        let pts: Vec<(f64, f64)> = (0..20).map(|k| 0.86 + 0.005 * k as f64).map(|phi| (phi, r.mean_stress(phi, 2.0))).collect();
+        let pts: Vec<(f64, f64)> = (0..20)
+            .map(|k| 0.86 + 0.005 * k as f64)
+            .map(|phi| (phi, r.mean_stress(phi, 2.0)))
+            .collect();
         let (rms, n) = r.rms_relative_error(&pts, 2.0, 0.86, 0.95).unwrap();
         assert!(rms < 1e-14 && n == 19);
     }

@@ -39,7 +39,8 @@ pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
         min: 1.01 * 0.5 * spacing,
         max: 1.06 * 0.5 * spacing,
     };
-    let radii = crate::sample::draw_radii(&radius_range, columns * rows, 7).expect("a valid distribution");
+    let radii =
+        crate::sample::draw_radii(&radius_range, columns * rows, 7).expect("a valid distribution");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let mut jitter = || (unit_random(&mut rng) - 0.5) * 0.02 * spacing;
     let mut list = Vec::with_capacity(columns * rows);

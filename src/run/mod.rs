@@ -96,8 +96,8 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
 /// `summary.txt` in `options.out_dir`.
 pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSummary, RunError> {
     let out = &options.out_dir;
-    std::fs::create_dir_all(out).map_err(io_error(out))?;
     let mut world = build_world(scenario)?;
+    std::fs::create_dir_all(out).map_err(io_error(out))?;
     let started = Instant::now();
     let macro_path = out.join("macro.csv");
     let mut writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;

@@ -531,7 +531,11 @@ mod tests {
 
 /// Draws `count` radii from a distribution (validated first) with a ChaCha8 RNG seeded by
 /// `seed`, in draw order: the radii of a sample without its placement.
-pub fn draw_radii(radii: &RadiusDistribution, count: usize, seed: u64) -> Result<Vec<f64>, SampleError> {
+pub fn draw_radii(
+    radii: &RadiusDistribution,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<f64>, SampleError> {
     use rand::SeedableRng;
     SampleSpec {
         count,

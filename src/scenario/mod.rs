@@ -10,7 +10,7 @@ use crate::grain::{Material, ModelLevel};
 use crate::integration::Parameters;
 use crate::integration::parameters::critical_time_step;
 use crate::sample::{RadiusDistribution, SampleError, SampleSpec};
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -30,7 +30,6 @@ pub struct Scenario {
     pub deformation: DeformationSettings,
     #[serde(default)]
     pub time_step: TimeStep,
-    #[serde(deserialize_with = "strict::loading")]
     pub loading: Vec<Phase>,
     #[serde(default)]
     pub output: OutputSettings,
@@ -526,63 +525,4 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
         }
     }
     Ok(())
-}
-
-/// Strict reading of the loading program. `Phase` and `StrainRate` (in `boundary::loading`) do not
-/// deny unknown fields, so a misspelt or extra field in a phase would be ignored without a word;
-/// these remote definitions mirror them with `deny_unknown_fields`. The derived `Serialize` is
-/// never called: its exhaustive match makes the build fail when a variant is added to `Phase` or
-/// `StrainRate` without being mirrored here (a new field fails in the derived `Deserialize`).
-mod strict {
-    use super::{Deserialize, Deserializer, Phase, Serialize, StopWhen, StrainRate};
-
-    #[allow(dead_code)]
-    #[derive(Serialize, Deserialize)]
-    #[serde(remote = "Phase", rename = "Phase", deny_unknown_fields)]
-    enum PhaseDef {
-        Isotropic {
-            #[serde(with = "StrainRateDef")]
-            rate: StrainRate,
-            until: StopWhen,
-        },
-        Oedometric {
-            #[serde(with = "StrainRateDef")]
-            rate: StrainRate,
-            until: StopWhen,
-        },
-        Servo {
-            sxx: f64,
-            syy: f64,
-            gain: f64,
-            max_rate: f64,
-            until: StopWhen,
-        },
-        Relax {
-            until: StopWhen,
-        },
-    }
-
-    #[allow(dead_code)]
-    #[derive(Serialize, Deserialize)]
-    #[serde(remote = "StrainRate", rename = "StrainRate", deny_unknown_fields)]
-    enum StrainRateDef {
-        Constant(f64),
-        QuasiStatic {
-            inertial_number: f64,
-            max: f64,
-            fast: f64,
-            fast_until_phi: f64,
-        },
-    }
-
-    #[derive(Deserialize)]
-    #[serde(transparent)]
-    struct StrictPhase(#[serde(with = "PhaseDef")] Phase);
-
-    pub(super) fn loading<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Vec<Phase>, D::Error> {
-        let phases = Vec::<StrictPhase>::deserialize(deserializer)?;
-        Ok(phases.into_iter().map(|p| p.0).collect())
-    }
 }
