@@ -63,7 +63,7 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     builder.build().context("starting the worker threads")
 }
 
-fn load(path: &PathBuf) -> Result<Scenario> {
+fn load(path: &std::path::Path) -> Result<Scenario> {
     let (scenario, warnings) = Scenario::load(path)?;
     for w in &warnings {
         eprintln!("warning: {w}");

@@ -54,7 +54,8 @@ impl SecantLaw {
         let mut denominator = nominal + (self.b - 1.0) * normal_gap;
         let floor = self.floor * nominal;
         let mut capped = false;
-        if !(denominator > floor) {
+        // Written so that a NaN denominator also counts as out of the domain.
+        if denominator.is_nan() || denominator <= floor {
             if !self.cap || !denominator.is_finite() {
                 return Err(DomainExit { length, normal_gap });
             }

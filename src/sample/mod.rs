@@ -480,6 +480,30 @@ pub fn fractal_mean(dimension: f64, min: f64, max: f64) -> f64 {
     radii::fractal_moment(1.0, dimension, min, max)
 }
 
+/// Draws `count` radii from a distribution (validated first) with a ChaCha8 RNG seeded by
+/// `seed`, in draw order: the radii of a sample without its placement.
+pub fn draw_radii(
+    radii: &RadiusDistribution,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<f64>, SampleError> {
+    use rand::SeedableRng;
+    SampleSpec {
+        count,
+        box_width: f64::MAX,
+        box_height: f64::MAX,
+        radii: radii.clone(),
+    }
+    .validate()?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    radii::draw_radii(radii, count, &mut rng)
+}
+
+/// A uniform number in [0, 1) from a portable bit recipe (for jitter and the like).
+pub fn unit_random(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+    radii::unit_f64(rng)
+}
+
 #[cfg(test)]
 mod tests {
     use super::math;
@@ -527,28 +551,4 @@ mod tests {
         }
         sum * 2.0 / std::f64::consts::PI.sqrt()
     }
-}
-
-/// Draws `count` radii from a distribution (validated first) with a ChaCha8 RNG seeded by
-/// `seed`, in draw order: the radii of a sample without its placement.
-pub fn draw_radii(
-    radii: &RadiusDistribution,
-    count: usize,
-    seed: u64,
-) -> Result<Vec<f64>, SampleError> {
-    use rand::SeedableRng;
-    SampleSpec {
-        count,
-        box_width: f64::MAX,
-        box_height: f64::MAX,
-        radii: radii.clone(),
-    }
-    .validate()?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    radii::draw_radii(radii, count, &mut rng)
-}
-
-/// A uniform number in [0, 1) from a portable bit recipe (for jitter and the like).
-pub fn unit_random(rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
-    radii::unit_f64(rng)
 }

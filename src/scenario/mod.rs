@@ -473,6 +473,12 @@ fn validate_rate(
             if !r.is_finite() {
                 return Err(invalid(field, num(*r), "a finite strain rate"));
             }
+            if *r <= 0.0 {
+                warnings.push(format!(
+                    "{field} = Constant({r}): the box does not shrink; a phase that waits for a \
+                     packing fraction, a stress or jamming may never end (set output.max_steps)"
+                ));
+            }
         }
         StrainRate::QuasiStatic {
             inertial_number,
