@@ -315,3 +315,43 @@ fn volumetric_and_full_levels_agree_under_isotropic_load() {
     );
     assert!(s1 < 0.0);
 }
+
+#[test]
+fn stress_servo_brings_the_wall_stresses_to_their_targets() {
+    // Expectation: with walls driven by the servo, the wall stresses settle at the targets
+    // (the servo's fixed point), different on the two axes.
+    use sdem::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
+    use sdem::output::Measures;
+    let r = 0.5;
+    let mut world = World::new(
+        params(0.3, 0.2, r),
+        vec![Grain::at_rest(DVec2::ZERO, r)],
+        box_walls(-0.5, 0.5, -0.5, 0.5),
+    );
+    let (sxx, syy) = (0.02, 0.01);
+    let mut program = LoadingProgram::new(
+        vec![Phase::Servo {
+            sxx,
+            syy,
+            gain: 0.5,
+            max_rate: 0.05,
+            until: StopWhen::Steps(4000),
+        }],
+        &world.walls,
+    );
+    let state = |w: &World| LoadState {
+        jammed: true,
+        mean_diameter: 2.0 * r,
+        ..Measures::load_state(w, true, 2.0 * r)
+    };
+    while !program.finished() {
+        let s = state(&world);
+        program.drive(&mut world.walls, &s);
+        world.step().unwrap();
+        let s = state(&world);
+        program.advance(world.step, world.time, &world.walls, &s);
+    }
+    let s = state(&world);
+    assert!((s.sxx - sxx).abs() < 0.01 * sxx, "sxx = {}", s.sxx);
+    assert!((s.syy - syy).abs() < 0.01 * syy, "syy = {}", s.syy);
+}

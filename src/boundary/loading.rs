@@ -54,6 +54,9 @@ pub enum Phase {
     Oedometric { rate: StrainRate, until: StopWhen },
     /// Each axis is driven towards a target wall stress (compression positive): the box side
     /// changes at the relative rate `gain (s_c - target) / E`, capped at `max_rate`.
+    /// Through the contact dashpot the wall stress responds at once to the wall's own velocity,
+    /// so too high a gain makes the loop oscillate with period 2 steps; gains up to ~0.5 (with
+    /// E = rho = 1, gamma = 1) are stable in the tests.
     Servo {
         sxx: f64,
         syy: f64,

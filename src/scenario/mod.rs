@@ -349,6 +349,12 @@ impl Scenario {
                     non_negative(&format!("{field}.sxx"), *sxx)?;
                     non_negative(&format!("{field}.syy"), *syy)?;
                     positive(&format!("{field}.gain"), *gain)?;
+                    if *gain > 1.0 {
+                        warnings.push(format!(
+                            "{field}.gain = {gain}: the contact dashpot feeds the wall velocity back into \
+                             the wall stress; gains above ~1 can make the servo oscillate (0.5 is stable)"
+                        ));
+                    }
                     positive(&format!("{field}.max_rate"), *max_rate)?;
                     validate_until(&format!("{field}.until"), until)?;
                 }
