@@ -15,10 +15,12 @@
 //! (measures and files), [`run`] (a scenario from start to end).
 
 pub mod boundary;
+pub mod calibration;
 pub mod contact;
 pub mod geometry;
 pub mod grain;
 pub mod integration;
+pub mod meshfree;
 pub mod output;
 pub mod run;
 pub mod sample;

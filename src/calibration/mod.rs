@@ -1,0 +1,2 @@
+//! `sdem calibrate`: fits the secant contact law (a, b) to single-grain meshfree compressions
+//! (SPEC §10).
