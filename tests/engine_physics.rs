@@ -301,11 +301,17 @@ fn volumetric_and_full_levels_agree_under_isotropic_load() {
     let (a, b) = (full.grains[0], volumetric.grains[0]);
     // The full grain stays circular: the load has the square's symmetry.
     assert!((a.eps1 - a.eps2).abs() < 1e-12 * a.eps1.abs());
-    // Both levels reach the same strain. Not to rounding: the 360-gon against flat frictionless
-    // walls feels a small torque of period dbeta (it vanishes as dbeta -> 0), the grains spin
-    // slowly and differently, and that shifts the contacts by O(sagitta) — a relative 1e-5.
+    // Both levels reach the same strain, up to the polygon's orientation: a 360-gon against flat
+    // frictionless walls feels a small torque of period dbeta, the grains spin slowly and
+    // differently, and where the walls meet the polygon (a vertex or mid-edge) shifts the contact
+    // depth by at most the sagitta of an edge, R (1 - cos(dbeta/2)) = 3.8e-5 R at 1 degree. The
+    // strains may differ by that relative amount, twice over (two opposite walls).
+    let sagitta = 1.0 - (0.5 * full.table.dbeta).cos();
     let relative = (a.eps1 - b.eps1).abs() / a.eps1.abs();
-    assert!(relative < 1e-5, "full {a:?} volumetric {b:?}");
+    assert!(
+        relative < 2.0 * sagitta,
+        "relative difference {relative:e}: full {a:?} volumetric {b:?}"
+    );
     assert!(a.eps1 < 0.0);
     let (s1, _) = principal_stress(
         &full.params.material,

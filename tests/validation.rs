@@ -24,7 +24,8 @@ struct Row {
 
 fn run_shipped(name: &str) -> (RunSummary, Vec<Row>) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (scenario, _) = Scenario::load(&root.join("scenarios").join(format!("{name}.ron"))).unwrap();
+    let (scenario, _) =
+        Scenario::load(&root.join("scenarios").join(format!("{name}.ron"))).unwrap();
     let out: PathBuf = root.join("target/validation").join(name);
     let summary = run_scenario(
         &scenario,
@@ -38,7 +39,14 @@ fn run_shipped(name: &str) -> (RunSummary, Vec<Row>) {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
-    let (phase, phi, sxx, syy, p, q) = (col("phase"), col("phi"), col("sxx_c"), col("syy_c"), col("p_c"), col("q_c"));
+    let (phase, phi, sxx, syy, p, q) = (
+        col("phase"),
+        col("phi"),
+        col("sxx_c"),
+        col("syy_c"),
+        col("p_c"),
+        col("q_c"),
+    );
     let rows = lines
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
@@ -59,9 +67,15 @@ fn run_shipped(name: &str) -> (RunSummary, Vec<Row>) {
 fn check_isotropic(name: &str, paper_phi0: f64, paper_z0: f64, max_rms: f64) {
     let (summary, rows) = run_shipped(name);
     let jam = summary.jamming.expect("the sample jams");
-    let curve: Vec<(f64, f64)> = rows.iter().filter(|r| r.phase == "isotropic").map(|r| (r.phi, r.p_c)).collect();
+    let curve: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.phase == "isotropic")
+        .map(|r| (r.phi, r.p_c))
+        .collect();
     let paper = CantorReference::new(paper_phi0, paper_z0);
-    let (rms_paper, n_paper) = paper.rms_relative_error(&curve, 1.0, paper_phi0 + 0.01, 0.95).unwrap();
+    let (rms_paper, n_paper) = paper
+        .rms_relative_error(&curve, 1.0, paper_phi0 + 0.01, 0.95)
+        .unwrap();
     let (rms_own, n_own) = summary.eq69_rms_error.unwrap();
     println!(
         "{name}: phi_0 = {:.4}, z_0 = {:.3}, z_nr_0 = {:.3}; final phi = {:.4}, p_c = {:.4e}; \
@@ -87,7 +101,10 @@ fn check_isotropic(name: &str, paper_phi0: f64, paper_z0: f64, max_rms: f64) {
     // measurements (A: 17%, B: 25%), see docs/validation.md for why they are not lower.
     assert!(rms_paper < max_rms, "RMS {rms_paper}");
     // Past jamming the pressure only grows with phi (checked on rows 0.005 apart in phi).
-    let loaded: Vec<&(f64, f64)> = curve.iter().filter(|(phi, _)| *phi > jam.phi + 0.01).collect();
+    let loaded: Vec<&(f64, f64)> = curve
+        .iter()
+        .filter(|(phi, _)| *phi > jam.phi + 0.01)
+        .collect();
     for w in loaded.windows(2) {
         if w[1].0 > w[0].0 + 0.005 {
             assert!(w[1].1 > w[0].1, "p_c fell from {:?} to {:?}", w[0], w[1]);
@@ -109,12 +126,20 @@ fn isotropic_b_follows_eq69() {
 
 fn check_oedometric(name: &str) {
     let (summary, rows) = run_shipped(name);
-    let jam = summary.jamming.expect("the isotropic phase ends at jamming");
+    let jam = summary
+        .jamming
+        .expect("the isotropic phase ends at jamming");
     let oedometric: Vec<&Row> = rows.iter().filter(|r| r.phase == "oedometric").collect();
     let last = oedometric.last().expect("an oedometric phase");
-    println!("{name}: jamming phi_0 = {:.4}, z_nr_0 = {:.3}", jam.phi, jam.z_nr);
+    println!(
+        "{name}: jamming phi_0 = {:.4}, z_nr_0 = {:.3}",
+        jam.phi, jam.z_nr
+    );
     for target in [0.85, 0.87, 0.89, 0.91, 0.93] {
-        if let Some(r) = oedometric.iter().min_by(|a, b| (a.phi - target).abs().total_cmp(&(b.phi - target).abs())) {
+        if let Some(r) = oedometric
+            .iter()
+            .min_by(|a, b| (a.phi - target).abs().total_cmp(&(b.phi - target).abs()))
+        {
             println!(
                 "  phi {:.4}: sxx_c {:.4e}  syy_c {:.4e}  p_c {:.4e}  q_c {:.4e}  q/p {:.3}",
                 r.phi,

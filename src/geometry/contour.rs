@@ -197,7 +197,9 @@ pub fn fast_atan2(y: f64, x: f64) -> f64 {
     let t = num / den;
     let t2 = t * t;
     // atan(t) on [0, 1], max error 1.15e-5.
-    let mut a = t * (0.999_866_0 + t2 * (-0.330_299_5 + t2 * (0.180_141_0 + t2 * (-0.085_133_0 + t2 * 0.020_835_1))));
+    let mut a = t
+        * (0.999_866_0
+            + t2 * (-0.330_299_5 + t2 * (0.180_141_0 + t2 * (-0.085_133_0 + t2 * 0.020_835_1))));
     if ay > ax {
         a = FRAC_PI_2 - a;
     }
@@ -320,9 +322,16 @@ mod tests {
                     phi += std::f64::consts::TAU;
                 }
                 let s = table.sector(u);
-                assert!(table.vertex[s].perp_dot(u) >= 0.0 && table.vertex[(s + 1) % table.nodes].perp_dot(u) < 0.0);
+                assert!(
+                    table.vertex[s].perp_dot(u) >= 0.0
+                        && table.vertex[(s + 1) % table.nodes].perp_dot(u) < 0.0
+                );
                 let approx = ((phi / table.dbeta) as usize).min(table.nodes - 1);
-                assert!(s == approx || (s as isize - approx as isize).abs() == 1 || (s == 0 || approx == 0));
+                assert!(
+                    s == approx
+                        || (s as isize - approx as isize).abs() == 1
+                        || (s == 0 || approx == 0)
+                );
             }
         }
     }

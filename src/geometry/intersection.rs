@@ -41,6 +41,32 @@ pub struct ContactGeometry {
     pub normal_gap: f64,
 }
 
+/// Where the chain of one contour inside another was found in the previous step: the node
+/// indices (in [0, N)) of its ends, or `NONE`. A hint only decides where the exact search
+/// starts: a stale or wrong hint costs a few more tests, never a different result.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChainHint {
+    pub lo: i32,
+    pub hi: i32,
+}
+
+impl ChainHint {
+    pub const NONE: ChainHint = ChainHint { lo: -1, hi: -1 };
+}
+
+impl Default for ChainHint {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+/// Hints for both sides of a grain–grain contact.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PairHint {
+    pub first: ChainHint,
+    pub second: ChainHint,
+}
+
 /// The nodes of one contour inside another polygon, `lo..=hi` (indices not yet wrapped), and
 /// the two points where the contour leaves that polygon: on edge (lo-1, lo) and on (hi, hi+1).
 #[derive(Debug, Clone, Copy)]
@@ -64,16 +90,81 @@ enum ChainSearch {
 /// instead of one per node. Galloping is exact while the run covers at most half the contour (a
 /// probe within N/2 of the seed then always lands in the run or in the outside gap); longer runs
 /// (grains nearly swallowed) are walked node by node.
-fn chain_inside(table: &ContourTable, a: &GrainShape, b: &GrainShape) -> ChainSearch {
+fn chain_inside(
+    table: &ContourTable,
+    a: &GrainShape,
+    b: &GrainShape,
+    hint: &mut ChainHint,
+) -> ChainSearch {
     // a's node k in b's reference coordinates: p_k = M v_k + t.
     let m = b.inv_map * a.map;
     let t = b.inv_map * (a.center - b.center);
     let node_in_b = |k: isize| m * table.vertex[table.wrap(k)] + t;
     let inside = |k: isize| table.contains(node_in_b(k));
 
-    // Seed: the point of a's smooth contour nearest to b's centre in b's reference frame,
-    // where |p(beta)| is smallest (the deepest point, up to the polygon's sagitta). Start
-    // from the direction of b seen from a, then two Newton steps on |p(beta)|^2.
+    let n = table.nodes as isize;
+    let half = n / 2;
+    let ends = match hinted_ends(&inside, hint, n) {
+        Some(ends) => ends,
+        None => {
+            let Some(seed) = deepest_inside_node(table, a, b, &inside) else {
+                *hint = ChainHint::NONE;
+                return ChainSearch::Empty;
+            };
+            match (
+                find_end(&inside, seed, 1, half, None),
+                find_end(&inside, seed, -1, half, None),
+            ) {
+                (Some(forward), Some(backward)) if forward + backward < half => {
+                    Some((seed - backward, seed + forward))
+                }
+                _ => walk(&inside, seed, n),
+            }
+        }
+    };
+    let Some((lo, hi)) = ends else {
+        *hint = ChainHint::NONE;
+        return ChainSearch::Whole;
+    };
+    *hint = ChainHint {
+        lo: table.wrap(lo) as i32,
+        hi: table.wrap(hi) as i32,
+    };
+
+    // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
+    let exit = |k_in: isize, k_out: isize| {
+        let (p_in, p_out) = (node_in_b(k_in), node_in_b(k_out));
+        // Neighbouring nodes: the outside node's sector is a step or two from the inside one's.
+        let sector_in = table.sector(p_in);
+        let t = table.exit_parameter(
+            p_in,
+            sector_in,
+            p_out,
+            table.refine_sector(p_out, sector_in),
+        );
+        let v_in = table.vertex[table.wrap(k_in)];
+        let v_out = table.vertex[table.wrap(k_out)];
+        a.center + a.map * (v_in + (v_out - v_in) * t)
+    };
+    ChainSearch::Found(Chain {
+        lo,
+        hi,
+        exit_lo: exit(lo, lo - 1),
+        exit_hi: exit(hi, hi + 1),
+    })
+}
+
+/// A node of `a` inside `b` near the deepest point of `a`'s smooth contour into `b`: where
+/// |p(beta)| is smallest in b's reference frame (up to the polygon's sagitta). Starts from the
+/// direction of b seen from a, then two Newton steps on |p(beta)|^2.
+fn deepest_inside_node(
+    table: &ContourTable,
+    a: &GrainShape,
+    b: &GrainShape,
+    inside: &impl Fn(isize) -> bool,
+) -> Option<isize> {
+    let m = b.inv_map * a.map;
+    let t = b.inv_map * (a.center - b.center);
     let toward_b = a.inv_map * (b.center - a.center);
     let mut beta = toward_b.y.atan2(toward_b.x);
     for _ in 0..2 {
@@ -89,64 +180,102 @@ fn chain_inside(table: &ContourTable, a: &GrainShape, b: &GrainShape) -> ChainSe
         }
     }
     let k0 = table.nearest_node(beta);
-    let Some(seed) = [0, -1, 1, -2, 2].into_iter().map(|dk| k0 + dk).find(|&k| inside(k)) else {
-        return ChainSearch::Empty;
-    };
+    [0, -1, 1, -2, 2]
+        .into_iter()
+        .map(|dk| k0 + dk)
+        .find(|&k| inside(k))
+}
 
-    let n = table.nodes as isize;
+/// The chain's ends searched from last step's: exact when the hint's middle node is still
+/// inside (the run through it is the chain), None otherwise.
+fn hinted_ends(
+    inside: &impl Fn(isize) -> bool,
+    hint: &ChainHint,
+    n: isize,
+) -> Option<Option<(isize, isize)>> {
+    if hint.lo < 0 {
+        return None;
+    }
+    let lo = hint.lo as isize;
+    let mut hi = hint.hi as isize;
+    if hi < lo {
+        hi += n;
+    }
     let half = n / 2;
-    let (lo, hi) = match (gallop(&inside, seed, 1, half), gallop(&inside, seed, -1, half)) {
-        (Some(forward), Some(backward)) if forward + backward < half => (seed - backward, seed + forward),
-        _ => match walk(&inside, seed, n) {
-            Some(ends) => ends,
-            None => return ChainSearch::Whole,
-        },
-    };
-
-    // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
-    let exit = |k_in: isize, k_out: isize| {
-        let (p_in, p_out) = (node_in_b(k_in), node_in_b(k_out));
-        let t = table.exit_parameter(p_in, table.sector(p_in), p_out, table.sector(p_out));
-        let v_in = table.vertex[table.wrap(k_in)];
-        let v_out = table.vertex[table.wrap(k_out)];
-        a.center + a.map * (v_in + (v_out - v_in) * t)
-    };
-    ChainSearch::Found(Chain {
-        lo,
-        hi,
-        exit_lo: exit(lo, lo - 1),
-        exit_hi: exit(hi, hi + 1),
+    if hi - lo >= half {
+        return None;
+    }
+    let seed = (lo + hi) / 2;
+    if !inside(seed) {
+        return None;
+    }
+    let forward = find_end(inside, seed, 1, half, Some(hi - seed));
+    let backward = find_end(inside, seed, -1, half, Some(seed - lo));
+    Some(match (forward, backward) {
+        (Some(f), Some(b)) if f + b < half => Some((seed - b, seed + f)),
+        _ => walk(inside, seed, n),
     })
 }
 
-/// Largest d in [0, limit) with nodes `seed + dir*k` inside for k = 0..=d, given that the seed
-/// is inside; None when the probe reaches `limit` still inside.
+/// Largest d in [0, limit) such that the nodes `seed + dir*k` are inside for k = 0..=d, given
+/// that the seed is inside; None when the search reaches `limit` still inside. With a guess of
+/// d, gallops outwards from it (if inside) or inwards (if not), then bisects; without one,
+/// gallops from the seed.
 #[inline]
-fn gallop(inside: &impl Fn(isize) -> bool, seed: isize, dir: isize, limit: isize) -> Option<isize> {
-    let mut last_in = 0;
-    let mut step = 1;
-    let first_out = loop {
-        let probe = (last_in + step).min(limit);
-        if inside(seed + dir * probe) {
-            if probe == limit {
-                return None;
+fn find_end(
+    inside: &impl Fn(isize) -> bool,
+    seed: isize,
+    dir: isize,
+    limit: isize,
+    guess: Option<isize>,
+) -> Option<isize> {
+    let at = |d: isize| inside(seed + dir * d);
+    let (mut last_in, mut first_out);
+    match guess {
+        Some(g) if g > 0 && g < limit && !at(g) => {
+            // The end lies before the guess: gallop back towards the seed.
+            first_out = g;
+            let mut step = 1;
+            loop {
+                let probe = (first_out - step).max(0);
+                if probe == 0 || at(probe) {
+                    last_in = probe;
+                    break;
+                }
+                first_out = probe;
+                step *= 2;
             }
-            last_in = probe;
-            step *= 2;
-        } else {
-            break probe;
         }
-    };
-    let (mut low, mut high) = (last_in, first_out);
-    while high - low > 1 {
-        let mid = (low + high) / 2;
-        if inside(seed + dir * mid) {
-            low = mid;
-        } else {
-            high = mid;
+        _ => {
+            last_in = match guess {
+                Some(g) if g > 0 && g < limit => g,
+                _ => 0,
+            };
+            let mut step = 1;
+            loop {
+                let probe = (last_in + step).min(limit);
+                if at(probe) {
+                    if probe == limit {
+                        return None;
+                    }
+                    last_in = probe;
+                    step *= 2;
+                } else {
+                    first_out = probe;
+                    break;
+                }
+            }
         }
     }
-    Some(low)
+    while first_out - last_in > 1 {
+        let mid = (last_in + first_out) / 2;
+        if at(mid) {
+            last_in = mid;
+        } else {
+            first_out = mid;
+        }
+    }
+    Some(last_in)
 }
 
 /// Node-by-node walk from the seed; None when every node is inside.
@@ -162,7 +291,11 @@ fn walk(inside: &impl Fn(isize) -> bool, seed: isize, nodes: isize) -> Option<(i
     while inside(lo - 1) {
         lo -= 1;
     }
-    if hi - lo + 1 >= nodes { None } else { Some((lo, hi)) }
+    if hi - lo + 1 >= nodes {
+        None
+    } else {
+        Some((lo, hi))
+    }
 }
 
 /// Area of the cap polygon (from, chain nodes lo..=hi, to) and the largest distance of a chain
@@ -204,16 +337,27 @@ fn cap_area_and_depth(
 
 /// Contact between the contour polygons of grains i and j.
 pub fn grain_grain(table: &ContourTable, i: &GrainShape, j: &GrainShape) -> Overlap {
+    grain_grain_hinted(table, i, j, &mut PairHint::default())
+}
+
+/// [`grain_grain`] starting from last step's chains (`hint`, updated in place).
+pub fn grain_grain_hinted(
+    table: &ContourTable,
+    i: &GrainShape,
+    j: &GrainShape,
+    hint: &mut PairHint,
+) -> Overlap {
     let reach = i.bounding_radius + j.bounding_radius;
     if i.center.distance_squared(j.center) >= reach * reach {
+        *hint = PairHint::default();
         return Overlap::Separate;
     }
-    let chain_i = match chain_inside(table, i, j) {
+    let chain_i = match chain_inside(table, i, j, &mut hint.first) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
         ChainSearch::Found(c) => Some(c),
     };
-    let chain_j = match chain_inside(table, j, i) {
+    let chain_j = match chain_inside(table, j, i, &mut hint.second) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
         ChainSearch::Found(c) => Some(c),
@@ -279,8 +423,13 @@ pub fn grain_wall(
     };
     let n = table.nodes as isize;
     let beyond = |k: isize| node_height(k) < 0.0;
-    let (lo, hi) = match (gallop(&beyond, k_seed, 1, n / 2), gallop(&beyond, k_seed, -1, n / 2)) {
-        (Some(forward), Some(backward)) if forward + backward < n / 2 => (k_seed - backward, k_seed + forward),
+    let (lo, hi) = match (
+        find_end(&beyond, k_seed, 1, n / 2, None),
+        find_end(&beyond, k_seed, -1, n / 2, None),
+    ) {
+        (Some(forward), Some(backward)) if forward + backward < n / 2 => {
+            (k_seed - backward, k_seed + forward)
+        }
         _ => match walk(&beyond, k_seed, n) {
             Some(ends) => ends,
             None => return Overlap::Swallowed,
@@ -466,7 +615,11 @@ mod tests {
 
     /// Brute force over every node of both contours: the crossing points from the edges whose
     /// ends lie on both sides, the cap polygons node by node.
-    fn brute_force(table: &ContourTable, i: &GrainShape, j: &GrainShape) -> Option<(f64, f64, f64, f64)> {
+    fn brute_force(
+        table: &ContourTable,
+        i: &GrainShape,
+        j: &GrainShape,
+    ) -> Option<(f64, f64, f64, f64)> {
         let inside_of = |a: &GrainShape, b: &GrainShape| -> Vec<bool> {
             (0..table.nodes)
                 .map(|k| {
@@ -480,7 +633,11 @@ mod tests {
             return None;
         }
         // Cap of a: its inside nodes, with the chord through the two crossings.
-        let cap = |a: &GrainShape, inside: &[bool], chord: (DVec2, DVec2), outward: DVec2| -> (f64, f64) {
+        let cap = |a: &GrainShape,
+                   inside: &[bool],
+                   chord: (DVec2, DVec2),
+                   outward: DVec2|
+         -> (f64, f64) {
             let mid = 0.5 * (chord.0 + chord.1);
             let n = table.nodes;
             let Some(start) = (0..n).find(|&k| inside[k] && !inside[(k + n - 1) % n]) else {
@@ -518,20 +675,46 @@ mod tests {
         let table = ContourTable::new(1.0);
         let mut state = 99u64;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
         let mut checked = 0;
         for _ in 0..400 {
-            let i = GrainShape::new(DVec2::ZERO, 1.0, 6.0 * next(), 0.4 * next() - 0.2, 0.4 * next() - 0.2, 6.0 * next());
+            let i = GrainShape::new(
+                DVec2::ZERO,
+                1.0,
+                6.0 * next(),
+                0.4 * next() - 0.2,
+                0.4 * next() - 0.2,
+                6.0 * next(),
+            );
             let rj = 0.1 + 1.5 * next();
             let dir = DVec2::from_angle(6.3 * next());
-            let j = GrainShape::new(dir * (1.0 + rj) * (0.75 + 0.3 * next()), rj, 6.0 * next(), 0.3 * next() - 0.15, 0.3 * next() - 0.15, 6.0 * next());
-            let Overlap::Contact(c) = grain_grain(&table, &i, &j) else { continue };
+            let j = GrainShape::new(
+                dir * (1.0 + rj) * (0.75 + 0.3 * next()),
+                rj,
+                6.0 * next(),
+                0.3 * next() - 0.15,
+                0.3 * next() - 0.15,
+                6.0 * next(),
+            );
+            let Overlap::Contact(c) = grain_grain(&table, &i, &j) else {
+                continue;
+            };
             let (area_i, area_j, depth_i, depth_j) = brute_force(&table, &i, &j).unwrap();
             let scale = c.length * c.length;
-            assert!((c.cap_area_i - area_i).abs() < 1e-9 * scale, "{} vs {area_i}", c.cap_area_i);
-            assert!((c.cap_area_j - area_j).abs() < 1e-9 * scale, "{} vs {area_j}", c.cap_area_j);
+            assert!(
+                (c.cap_area_i - area_i).abs() < 1e-9 * scale,
+                "{} vs {area_i}",
+                c.cap_area_i
+            );
+            assert!(
+                (c.cap_area_j - area_j).abs() < 1e-9 * scale,
+                "{} vs {area_j}",
+                c.cap_area_j
+            );
             assert!((c.normal_gap + 0.5 * (depth_i + depth_j)).abs() < 1e-9 * c.length);
             checked += 1;
         }

@@ -6,4 +6,6 @@ pub mod contour;
 pub mod intersection;
 
 pub use contour::{ContourTable, GrainShape};
-pub use intersection::{ContactGeometry, Overlap, grain_grain, grain_wall};
+pub use intersection::{
+    ChainHint, ContactGeometry, Overlap, PairHint, grain_grain, grain_grain_hinted, grain_wall,
+};

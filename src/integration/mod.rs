@@ -18,7 +18,9 @@ pub use parameters::Parameters;
 use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
-use crate::geometry::{ContourTable, GrainShape, Overlap, grain_grain, grain_wall};
+use crate::geometry::{
+    ContourTable, GrainShape, Overlap, PairHint, grain_grain_hinted, grain_wall,
+};
 use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
 use crate::grain::{Grain, ModelLevel};
 use glam::{DMat2, DVec2};
@@ -63,6 +65,8 @@ pub struct PairContact {
     pub cap_area_first: f64,
     pub cap_area_second: f64,
     pub capped: bool,
+    /// Where this pair's chains were: the next step's search starts there.
+    pub hint: PairHint,
 }
 
 /// Per-grain quantities of the last step, kept for output.
@@ -167,6 +171,8 @@ impl World {
             .collect();
         if self.neighbors.needs_rebuild(&centers, &reach) {
             self.neighbors.build(&centers, &reach);
+            // Pair indices change with the list: drop the old search hints.
+            self.pair_contacts.clear();
         }
         self.pair_contacts
             .resize(self.neighbors.pairs.len(), PairContact::default());
@@ -190,8 +196,11 @@ impl World {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
+                    let mut hint = slot.hint;
                     *slot = PairContact::default();
-                    match grain_grain(table, &fi.shape, &fj.shape) {
+                    let overlap = grain_grain_hinted(table, &fi.shape, &fj.shape, &mut hint);
+                    slot.hint = hint;
+                    match overlap {
                         Overlap::Separate => {}
                         Overlap::Swallowed => {
                             failure.get_or_insert(Instability::Swallowed {
@@ -231,6 +240,7 @@ impl World {
                                     cap_area_first: c.cap_area_i,
                                     cap_area_second: c.cap_area_j,
                                     capped: response.capped,
+                                    hint,
                                 };
                             }
                         },

@@ -1,0 +1,60 @@
+//! Micro-benchmarks of the hot kernels: `cargo bench --bench kernels`.
+//! The whole-step throughput on a dense packing is `sdem bench` (docs/performance.md).
+
+use glam::DVec2;
+use sdem::geometry::{
+    ContourTable, GrainShape, PairHint, grain_grain, grain_grain_hinted, grain_wall,
+};
+use std::hint::black_box;
+
+fn main() {
+    divan::main();
+}
+
+/// Two sample-A grains overlapping by `depth` of a diameter, deformed and rotated.
+fn pair(depth: f64) -> (GrainShape, GrainShape) {
+    let i = GrainShape::new(DVec2::ZERO, 0.012, 0.3, 0.02, -0.03, 0.7);
+    let j = GrainShape::new(
+        DVec2::new(0.024 * (1.0 - depth), 0.001),
+        0.012,
+        -1.1,
+        -0.01,
+        0.02,
+        2.0,
+    );
+    (i, j)
+}
+
+#[divan::bench(args = [0.01, 0.05, 0.15])]
+fn grain_grain_cold(bencher: divan::Bencher, depth: f64) {
+    let table = ContourTable::new(1.0);
+    let (i, j) = pair(depth);
+    bencher.bench(|| grain_grain(&table, black_box(&i), black_box(&j)));
+}
+
+#[divan::bench(args = [0.01, 0.05, 0.15])]
+fn grain_grain_warm(bencher: divan::Bencher, depth: f64) {
+    let table = ContourTable::new(1.0);
+    let (i, j) = pair(depth);
+    let mut hint = PairHint::default();
+    grain_grain_hinted(&table, &i, &j, &mut hint);
+    bencher.bench_local(|| grain_grain_hinted(&table, black_box(&i), black_box(&j), &mut hint));
+}
+
+#[divan::bench]
+fn grain_wall_contact(bencher: divan::Bencher) {
+    let table = ContourTable::new(1.0);
+    let g = GrainShape::new(DVec2::new(0.0, 0.011), 0.012, 0.3, 0.02, -0.03, 0.7);
+    bencher.bench(|| grain_wall(&table, black_box(&g), DVec2::ZERO, DVec2::Y));
+}
+
+#[divan::bench(args = [1000, 10000], sample_count = 20)]
+fn step_dense_packing(bencher: divan::Bencher, grains: usize) {
+    let mut world = sdem::run::bench::dense_packing(grains, 1.0);
+    world.step().unwrap();
+    bencher
+        .counter(divan::counter::ItemsCount::new(world.grains.len()))
+        .bench_local(|| {
+            world.step().unwrap();
+        });
+}
