@@ -32,6 +32,7 @@ fn run_shipped(name: &str) -> (RunSummary, Vec<Row>) {
         &RunOptions {
             out_dir: out.clone(),
             progress_seconds: Some(60.0),
+            ..Default::default()
         },
     )
     .unwrap();
