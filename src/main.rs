@@ -2,10 +2,13 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
+use sdem::output::mcap::{McapSettings, TOPIC_GRAINS, Trajectory};
+use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
+use sdem::output::render::{RenderOptions, render_frame};
 use sdem::run::{RunOptions, run_scenario};
 use sdem::scenario::Scenario;
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
 #[command(
@@ -33,6 +36,14 @@ enum Command {
         /// No progress lines.
         #[arg(long)]
         quiet: bool,
+        /// Also write the trajectory (grains, contacts, walls, macro rows, a Foxglove scene) as
+        /// an MCAP log, one frame per row of macro.csv.
+        #[arg(long, value_name = "FILE")]
+        mcap: Option<PathBuf>,
+        /// Write the Foxglove `/scene` channel every K frames (0: never; default: every frame up
+        /// to 10^4 grains, every ceil(N/10^4)-th frame above).
+        #[arg(long, value_name = "K", requires = "mcap")]
+        mcap_scene_every: Option<u64>,
     },
     /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree).
     Bench {
@@ -48,8 +59,93 @@ enum Command {
         #[arg(long, default_value_t = 1.0)]
         resolution: f64,
     },
+    /// Fit the secant contact law (a, b) to single-grain meshfree compressions (SPEC §10):
+    /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg.
+    Calibrate {
+        /// Poisson's ratios, comma separated (default 0,0.1,0.2,0.3,0.4,0.45,0.49).
+        #[arg(long, value_delimiter = ',')]
+        nu: Option<Vec<f64>>,
+        /// Output directory.
+        #[arg(long, default_value = "out/calibration")]
+        out: PathBuf,
+        /// Final box side (the disc has diameter 1).
+        #[arg(long, default_value_t = 0.90)]
+        final_side: f64,
+        /// Load steps from side 1 to the final side.
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Boundary nodes of the disc (a multiple of 4): the nodal density.
+        #[arg(long)]
+        boundary_nodes: Option<usize>,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Check a scenario file and print its warnings and derived settings, without running it.
     Check { scenario: PathBuf },
+    /// Summarise a trajectory log (MCAP): channels, frames, time span, sizes.
+    Inspect {
+        /// The log written by `sdem run --mcap FILE`.
+        file: PathBuf,
+    },
+    /// Draw one frame of a trajectory log: deformed grains with their flat contacts, coloured
+    /// by mean stress, with a colour bar (PNG, or SVG if OUT ends in .svg).
+    Render {
+        file: PathBuf,
+        /// Frame number, from 0; negative counts from the end (-1: the last, the default).
+        #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["step", "jamming"])]
+        frame: Option<i64>,
+        /// The first frame at or after this step.
+        #[arg(long, conflicts_with = "jamming")]
+        step: Option<u64>,
+        /// The frame at the run's jamming point.
+        #[arg(long)]
+        jamming: bool,
+        /// Output picture.
+        #[arg(long)]
+        out: PathBuf,
+        /// Pixels along the longer side of the box.
+        #[arg(long, default_value_t = 1200)]
+        size: u32,
+        /// Top of the colour scale (mean stress, compression positive; default: the frame's
+        /// 99th percentile).
+        #[arg(long)]
+        stress_max: Option<f64>,
+        /// Show only this part of the sample: X0,Y0,X1,Y1 (default: the whole box).
+        #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_region)]
+        region: Option<Region>,
+    },
+    /// Plot the macroscopic curves (p_c against phi with eq. 69, z and q_c against p_c) from a
+    /// run directory, its macro.csv or a trajectory log.
+    Plot {
+        /// A run directory, a macro.csv or an .mcap log.
+        source: PathBuf,
+        /// Output directory for p_phi, z_p and q_p pictures.
+        #[arg(long)]
+        out: PathBuf,
+        /// SVG instead of PNG.
+        #[arg(long)]
+        svg: bool,
+    },
+}
+
+/// A rectangle of the sample, `(lower left, upper right)`.
+#[derive(Debug, Clone, Copy)]
+struct Region((glam::DVec2, glam::DVec2));
+
+fn parse_region(text: &str) -> std::result::Result<Region, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| format!("`{text}`: {e}"))?;
+    match v[..] {
+        [x0, y0, x1, y1] if x1 > x0 && y1 > y0 && v.iter().all(|x| x.is_finite()) => {
+            Ok(Region((glam::DVec2::new(x0, y0), glam::DVec2::new(x1, y1))))
+        }
+        _ => Err(format!(
+            "`{text}`: expected X0,Y0,X1,Y1 with X1 > X0 and Y1 > Y0"
+        )),
+    }
 }
 
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -89,6 +185,8 @@ fn run(cli: Cli) -> Result<()> {
             out,
             threads,
             quiet,
+            mcap,
+            mcap_scene_every,
         } => {
             let parsed = load(&scenario)?;
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
@@ -102,12 +200,15 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 out_dir.display()
             );
+            // On a terminal: a progress bar (after a few seconds); otherwise a line every 30 s.
+            let terminal = std::io::stderr().is_terminal();
             let options = RunOptions {
                 out_dir: out_dir.clone(),
-                progress_seconds: (!quiet).then_some(if std::io::stderr().is_terminal() {
-                    2.0
-                } else {
-                    30.0
+                progress_seconds: (!quiet && !terminal).then_some(30.0),
+                progress_bar: !quiet && terminal,
+                mcap: mcap.map(|path| McapSettings {
+                    path,
+                    scene_every: mcap_scene_every,
                 }),
             };
             let summary = pool.install(|| run_scenario(&parsed, &options))?;
@@ -135,6 +236,16 @@ fn run(cli: Cli) -> Result<()> {
                 summary.last.p_c,
                 out_dir.join("macro.csv").display()
             );
+            if let Some(m) = &options.mcap {
+                let bytes = std::fs::metadata(&m.path).map(|m| m.len()).unwrap_or(0);
+                eprintln!(
+                    "trajectory log: {} ({:.1} MB; {:.2} s writing it, {:.1}% of the run)",
+                    m.path.display(),
+                    bytes as f64 / 1e6,
+                    summary.mcap_seconds,
+                    100.0 * summary.mcap_seconds / summary.wall_seconds.max(1e-9)
+                );
+            }
         }
         Command::Bench {
             grains,
@@ -151,15 +262,42 @@ fn run(cli: Cli) -> Result<()> {
                 sdem::run::bench::run_bench(&mut world, 20, steps)
             })?;
             println!(
-                "grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  seconds: {:.3}",
+                "grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
                 result.grains,
                 result.steps,
                 pool.current_num_threads(),
                 result.phi,
                 2.0 * result.contacts as f64 / result.grains as f64,
+                result.neighbor_builds,
                 result.seconds
             );
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
+        }
+        Command::Calibrate {
+            nu,
+            out,
+            final_side,
+            steps,
+            boundary_nodes,
+            threads,
+        } => {
+            let mut options = sdem::calibration::CalibrateOptions {
+                out_dir: out,
+                final_box_side: final_side,
+                ..Default::default()
+            };
+            if let Some(nus) = nu {
+                options.nus = nus;
+            }
+            if let Some(steps) = steps {
+                options.steps = steps;
+            }
+            if let Some(nodes) = boundary_nodes {
+                options.boundary_nodes = nodes;
+            }
+            let pool = thread_pool(threads)?;
+            let report = pool.install(|| sdem::calibration::run_calibration(&options))?;
+            println!("{report}");
         }
         Command::Check { scenario } => {
             let parsed = load(&scenario)?;
@@ -170,6 +308,128 @@ fn run(cli: Cli) -> Result<()> {
             );
             println!("time step: {:.4e}", parsed.time_step_value());
         }
+        Command::Inspect { file } => inspect(&file)?,
+        Command::Render {
+            file,
+            frame,
+            step,
+            jamming,
+            out,
+            size,
+            stress_max,
+            region,
+        } => {
+            let log = Trajectory::open(&file)?;
+            let index = if jamming {
+                let step: u64 = log
+                    .summary_info("jamming_step")
+                    .and_then(|s| s.parse().ok())
+                    .with_context(|| {
+                        format!("{}: the log records no jamming point", file.display())
+                    })?;
+                log.frame_at_step(step)? as i64
+            } else if let Some(step) = step {
+                log.frame_at_step(step)? as i64
+            } else {
+                frame.unwrap_or(-1)
+            };
+            let frame = log.frame(index)?;
+            let options = RenderOptions {
+                size,
+                stress_max,
+                title: log.run_info("scenario").unwrap_or_default().to_string(),
+                region: region.map(|r| r.0),
+            };
+            let info = render_frame(&frame, &out, &options)
+                .map_err(|e| anyhow::anyhow!("drawing {}: {e}", out.display()))?;
+            eprintln!(
+                "{}: frame {} (step {}), {} grains, colour scale 0 .. {:.3e}, {}x{} px",
+                out.display(),
+                log.resolve_frame(index)?,
+                frame.step,
+                info.grains,
+                info.stress_max,
+                info.width,
+                info.height
+            );
+        }
+        Command::Plot { source, out, svg } => {
+            let series = MacroSeries::load(&source).map_err(anyhow::Error::msg)?;
+            let format = if svg {
+                PlotFormat::Svg
+            } else {
+                PlotFormat::Png
+            };
+            let written = plot_macro(&series, &out, format).map_err(anyhow::Error::msg)?;
+            for path in written {
+                println!("{}", path.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `sdem inspect`: what a trajectory log holds.
+fn inspect(file: &Path) -> Result<()> {
+    let log = Trajectory::open(file)?;
+    let sizes = log.sizes();
+    println!(
+        "file: {} ({} bytes, written by {})",
+        file.display(),
+        sizes.file_bytes,
+        log.library()
+    );
+    if let Some(name) = log.run_info("scenario") {
+        println!(
+            "scenario: {name}, {} grains, dt = {}, contour nodes = {}",
+            log.run_info("grains").unwrap_or("?"),
+            log.run_info("dt").unwrap_or("?"),
+            log.run_info("contour_nodes").unwrap_or("?")
+        );
+    }
+    let frames = log.frame_count();
+    println!("frames: {frames}");
+    if let Some(((s0, t0), (s1, t1))) = log.span()? {
+        println!("steps: {s0} .. {s1}");
+        println!("time span: {t0:.6e} .. {t1:.6e}");
+    }
+    println!("channels:");
+    for c in log.channels() {
+        println!(
+            "  {:<10} {:>7} messages  {} ({}), {}",
+            c.topic, c.messages, c.schema_name, c.schema_encoding, c.message_encoding
+        );
+    }
+    for a in log.attachments() {
+        println!(
+            "attachment: {} ({}, {} bytes)",
+            a.name, a.media_type, a.size
+        );
+    }
+    for (name, values) in log.metadata() {
+        let text: Vec<String> = values.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        println!("metadata {name}: {}", text.join(", "));
+    }
+    println!(
+        "chunks: {} ({}), {} bytes compressed, {} uncompressed (ratio {:.2})",
+        sizes.chunks,
+        log.compression(),
+        sizes.compressed_bytes,
+        sizes.uncompressed_bytes,
+        sizes.uncompressed_bytes as f64 / sizes.compressed_bytes.max(1) as f64
+    );
+    let grains: f64 = log
+        .run_info("grains")
+        .and_then(|g| g.parse().ok())
+        .unwrap_or(0.0);
+    if frames > 0 && grains > 0.0 && log.channel(TOPIC_GRAINS).is_some() {
+        println!(
+            "bytes per grain per frame (whole file): {:.1}",
+            sizes.file_bytes as f64 / (grains * frames as f64)
+        );
+    }
+    if log.summary_info("status").is_none() {
+        println!("note: no sdem.summary metadata (the run did not finish its log)");
     }
     Ok(())
 }

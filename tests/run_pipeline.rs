@@ -26,6 +26,7 @@ fn small_isotropic_compaction_jams_and_reports() {
         &RunOptions {
             out_dir: out.clone(),
             progress_seconds: None,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -108,15 +108,28 @@ impl ContourTable {
     pub fn refine_sector(&self, u: DVec2, mut s: usize) -> usize {
         let n = self.nodes;
         for _ in 0..n {
+            let next = self.next(s);
             if self.vertex[s].perp_dot(u) < 0.0 {
-                s = if s == 0 { n - 1 } else { s - 1 };
-            } else if self.vertex[(s + 1) % n].perp_dot(u) >= 0.0 {
-                s = (s + 1) % n;
+                s = self.previous(s);
+            } else if self.vertex[next].perp_dot(u) >= 0.0 {
+                s = next;
             } else {
                 break;
             }
         }
         s
+    }
+
+    /// Index k + 1 modulo N, for k in [0, N): no division on the hot path.
+    #[inline]
+    pub fn next(&self, k: usize) -> usize {
+        if k + 1 == self.nodes { 0 } else { k + 1 }
+    }
+
+    /// Index k - 1 modulo N, for k in [0, N).
+    #[inline]
+    pub fn previous(&self, k: usize) -> usize {
+        if k == 0 { self.nodes - 1 } else { k - 1 }
     }
 
     /// Gauge (Minkowski functional) of the unit polygon at `u`, given the sector that holds `u`:
@@ -156,8 +169,12 @@ impl ContourTable {
         let n = self.nodes;
         let d = outside - inside;
         // Walk from the inside sector to the outside one along the shorter way round.
-        let forward = (sector_outside + n - sector_inside) % n;
-        let backward = (sector_inside + n - sector_outside) % n;
+        let forward = if sector_outside >= sector_inside {
+            sector_outside - sector_inside
+        } else {
+            sector_outside + n - sector_inside
+        };
+        let backward = n - forward;
         let (steps, step_forward) = if forward <= backward {
             (forward, true)
         } else {
@@ -175,9 +192,9 @@ impl ContourTable {
                 }
             }
             s = if step_forward {
-                (s + 1) % n
+                self.next(s)
             } else {
-                (s + n - 1) % n
+                self.previous(s)
             };
         }
         best.clamp(0.0, 1.0)

@@ -170,9 +170,21 @@ impl World {
             .map(|f| f.shape.bounding_radius)
             .collect();
         if self.neighbors.needs_rebuild(&centers, &reach) {
+            let old_pairs = std::mem::take(&mut self.neighbors.pairs);
+            let old_contacts = std::mem::take(&mut self.pair_contacts);
             self.neighbors.build(&centers, &reach);
-            // Pair indices change with the list: drop the old search hints.
-            self.pair_contacts.clear();
+            // Pair indices change with the list: carry each surviving pair's search hint over
+            // (both lists are sorted by (i, j)).
+            self.pair_contacts = vec![PairContact::default(); self.neighbors.pairs.len()];
+            let mut k = 0;
+            for (slot, pair) in self.pair_contacts.iter_mut().zip(&self.neighbors.pairs) {
+                while k < old_pairs.len() && old_pairs[k] < *pair {
+                    k += 1;
+                }
+                if k < old_pairs.len() && old_pairs[k] == *pair {
+                    slot.hint = old_contacts[k].hint;
+                }
+            }
         }
         self.pair_contacts
             .resize(self.neighbors.pairs.len(), PairContact::default());

@@ -1,2 +1,51 @@
 //! Meshfree reference solver (MELODY-like, SPEC §10): RPIM shape functions, total-Lagrangian
 //! hyperelasticity, wall contact with augmented Lagrangian, quasi-static and dynamic stepping.
+//!
+//! One grain at a time (dense linear algebra): field nodes of a disc on concentric rings
+//! ([`DiscNodes`]), a Delaunay integration mesh with 6 Gauss points per triangle
+//! ([`IntegrationMesh`]), RPIM shape functions with supports of 20 neighbours ([`Rpim`]),
+//! plane-strain neo-Hookean or Saint Venant–Kirchhoff material ([`Hyperelastic`]), internal
+//! forces, tangent and consistent mass ([`DiscModel`]), frictionless rigid walls
+//! ([`Wall`], appendix C), Newton nested in augmented-Lagrangian loops ([`Problem`]) and the
+//! Bathe composite / trapezoidal dynamic schemes ([`Dynamics`]).
+//!
+//! Not implemented: the grain–grain smoothed node-to-segment element (appendix B), so the
+//! meshfree path handles one grain among walls.
+
+pub mod contact;
+pub mod discretization;
+pub mod material;
+pub mod model;
+pub mod rpim;
+pub mod solver;
+
+pub use contact::{Multipliers, Wall, WallState, add_wall_contacts, contact_length};
+pub use discretization::{DiscNodes, GaussPoint, IntegrationMesh, NodeDensity};
+pub use material::{Hyperelastic, HyperelasticLaw, StressResponse};
+pub use model::{Dense, DiscModel};
+pub use rpim::{Rpim, SUPPORT_NEIGHBOURS, ShapeFunctions};
+pub use solver::{
+    DynamicState, DynamicTerms, Dynamics, Problem, SolveStats, SolverSettings, TimeScheme, lu_solve,
+};
+
+/// Failures of the meshfree solver.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshfreeError {
+    #[error("invalid meshfree input: {0}")]
+    BadInput(String),
+    #[error(
+        "node density too coarse: {nodes} field nodes where at least {needed} are needed \
+         (each support must hold 20 neighbours); raise the number of boundary nodes"
+    )]
+    TooCoarse { nodes: usize, needed: usize },
+    #[error(
+        "material inverted at Gauss point ({:.4}, {:.4}): det F = {det:.3e}",
+        position[0],
+        position[1]
+    )]
+    Inverted { position: [f64; 2], det: f64 },
+    #[error("singular tangent matrix (is a rigid-body motion unconstrained?)")]
+    Singular,
+    #[error("no convergence: {0}")]
+    NotConverged(String),
+}

@@ -4,8 +4,11 @@
 //! the per-grain stresses of `grains.csv` are tension positive like everything in the library.
 
 pub mod files;
+pub mod mcap;
 pub mod measures;
+pub mod plot;
 pub mod reference;
+pub mod render;
 
 pub use files::{MacroWriter, write_grains_csv};
 pub use measures::Measures;

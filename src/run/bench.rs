@@ -21,6 +21,8 @@ pub struct BenchResult {
     pub seconds: f64,
     pub contacts: u64,
     pub phi: f64,
+    /// Neighbour-list builds during the timed steps.
+    pub neighbor_builds: u64,
 }
 
 impl BenchResult {
@@ -69,6 +71,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
     for _ in 0..warmup {
         world.step()?;
     }
+    let builds_before = world.neighbors.builds;
     let start = Instant::now();
     for _ in 0..steps {
         world.step()?;
@@ -81,5 +84,6 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         seconds,
         contacts: world.totals.contacts,
         phi: world.totals.grain_area / (width * height),
+        neighbor_builds: world.neighbors.builds - builds_before,
     })
 }

@@ -3,18 +3,21 @@
 
 pub mod bench;
 
-use crate::boundary::loading::LoadingProgram;
+use crate::boundary::loading::{LoadingProgram, StopWhen};
 use crate::boundary::walls::box_walls;
 use crate::grain::Grain;
 use crate::integration::{Instability, World};
+use crate::output::mcap::{McapSettings, TrajectoryWriter};
 use crate::output::reference::CantorReference;
 use crate::output::{MacroWriter, Measures, write_grains_csv};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
 use glam::DVec2;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -60,6 +63,8 @@ pub struct RunSummary {
     /// For nu = 0.5: RMS relative error of p_c(phi) against eq. 69 with the run's own phi_0 and
     /// Z_0 (= z_nr at jamming), over phi in [phi_0 + 0.01, final phi], and the number of rows.
     pub eq69_rms_error: Option<(f64, usize)>,
+    /// Wall-clock seconds spent writing the MCAP log (0 without one).
+    pub mcap_seconds: f64,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -67,6 +72,11 @@ pub struct RunOptions {
     pub out_dir: PathBuf,
     /// Print a progress line to stderr every this many seconds (None: silent).
     pub progress_seconds: Option<f64>,
+    /// Also write the trajectory as an MCAP log (see [`crate::output::mcap`]).
+    pub mcap: Option<McapSettings>,
+    /// Show a progress bar on stderr once the run has lasted a few seconds; drawn only when
+    /// stderr is a terminal.
+    pub progress_bar: bool,
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
@@ -98,6 +108,23 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     let out = &options.out_dir;
     let mut world = build_world(scenario)?;
     std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let mut log = match &options.mcap {
+        Some(settings) => Some(
+            TrajectoryWriter::create(settings, scenario, &world)
+                .map_err(|e| io_error(&settings.path)(e.into()))?,
+        ),
+        None => None,
+    };
+    let log_error = |e: crate::output::mcap::WriteError| {
+        let path = options
+            .mcap
+            .as_ref()
+            .map(|m| m.path.clone())
+            .unwrap_or_default();
+        io_error(&path)(e.into())
+    };
+    let mut mcap_seconds = 0.0;
+    let mut progress = Progress::new(options.progress_bar, &program_phases(scenario));
     let started = Instant::now();
     let macro_path = out.join("macro.csv");
     let mut writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;
@@ -123,10 +150,22 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
         let rate = program.rate;
         if let Err(instability) = world.step() {
+            progress.finish();
             let state_file = out.join("grains_last_good.csv");
             let mut snapshot = world.clone();
             snapshot.grains = last_good;
             write_grains_csv(&state_file, &snapshot).map_err(io_error(&state_file))?;
+            if let Some(log) = log.take() {
+                let outcome: BTreeMap<String, String> = [
+                    ("status", "unstable".to_string()),
+                    ("instability", instability.to_string()),
+                    ("last_good_step", last_good_step.to_string()),
+                ]
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), v))
+                .collect();
+                log.finish(outcome).map_err(log_error)?;
+            }
             return Err(RunError::Unstable {
                 instability,
                 last_good_step,
@@ -177,15 +216,21 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
                 isotropic_curve.push((last_row.phi, last_row.p_c));
             }
             writer.write(&last_row).map_err(io_error(&macro_path))?;
+            if let Some(log) = log.as_mut() {
+                let t = Instant::now();
+                log.write_frame(&world, &last_row).map_err(log_error)?;
+                mcap_seconds += t.elapsed().as_secs_f64();
+            }
             last_good.clone_from(&world.grains);
             last_good_step = world.step;
         }
+        progress.update(&program, &world, state.phi, p_c, started);
         if let Some(seconds) = options.progress_seconds
             && last_progress.elapsed().as_secs_f64() >= seconds
         {
             last_progress = Instant::now();
             let elapsed = started.elapsed().as_secs_f64();
-            eprintln!(
+            progress.suspend(|| eprintln!(
                 "step {:>9}  t {:.4e}  {:<10}  phi {:.4}  p_c {:.3e}  rate {:.2e}  contacts {}  {:.2e} grain-steps/s",
                 world.step,
                 world.time,
@@ -195,12 +240,13 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
                 rate,
                 world.totals.contacts,
                 world.step as f64 * world.grains.len() as f64 / elapsed
-            );
+            ));
         }
         if limit_reached {
             break;
         }
     }
+    progress.finish();
     let grains_path = out.join("grains.csv");
     write_grains_csv(&grains_path, &world).map_err(io_error(&grains_path))?;
     let jamming = confirmed_jamming;
@@ -212,7 +258,7 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         }
         _ => None,
     };
-    let summary = RunSummary {
+    let mut summary = RunSummary {
         eq69_rms_error,
         grains: world.grains.len(),
         steps: world.step,
@@ -223,10 +269,197 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         last: last_row,
         max_loaded_inertial_number,
         neighbor_builds: world.neighbors.builds,
+        mcap_seconds,
     };
+    if let Some(log) = log.take() {
+        let t = Instant::now();
+        log.finish(log_outcome(&summary)).map_err(log_error)?;
+        summary.mcap_seconds += t.elapsed().as_secs_f64();
+    }
     let summary_path = out.join("summary.txt");
     write_summary(&summary_path, scenario, &summary).map_err(io_error(&summary_path))?;
     Ok(summary)
+}
+
+/// The `sdem.summary` metadata of a finished run (no wall-clock time: logs are deterministic).
+fn log_outcome(s: &RunSummary) -> BTreeMap<String, String> {
+    let mut m: BTreeMap<String, String> = BTreeMap::new();
+    m.insert("status".into(), "complete".into());
+    m.insert("steps".into(), s.steps.to_string());
+    m.insert("dt".into(), format!("{:e}", s.dt));
+    if let Some(j) = &s.jamming {
+        m.insert("jamming_step".into(), j.step.to_string());
+        m.insert("phi_0".into(), format!("{}", j.phi));
+        m.insert("z_0".into(), format!("{}", j.z));
+        m.insert("z_nr_0".into(), format!("{}", j.z_nr));
+    }
+    m.insert("final_phi".into(), format!("{}", s.last.phi));
+    m.insert("final_p_c".into(), format!("{:e}", s.last.p_c));
+    if let Some((rms, n)) = s.eq69_rms_error {
+        m.insert("eq69_rms_relative_error".into(), format!("{rms}"));
+        m.insert("eq69_points".into(), n.to_string());
+    }
+    m
+}
+
+fn program_phases(scenario: &Scenario) -> Vec<&'static str> {
+    scenario.loading.iter().map(|p| p.name()).collect()
+}
+
+/// Fraction of a stop condition reached, when it can be told.
+fn stop_fraction(
+    until: &StopWhen,
+    program: &LoadingProgram,
+    world: &World,
+    phi: f64,
+    p_c: f64,
+    phi_start: f64,
+) -> Option<f64> {
+    let f = match until {
+        StopWhen::PackingFraction(target) => {
+            let span = target - phi_start;
+            (span.abs() > 1e-12).then(|| (phi - phi_start) / span)?
+        }
+        StopWhen::MeanStress(target) => (*target > 0.0).then(|| p_c / target)?,
+        StopWhen::Jammed => return None,
+        StopWhen::Steps(n) => (world.step - program.phase_start_step) as f64 / (*n).max(1) as f64,
+        StopWhen::Time(t) => (world.time - program.phase_start_time) / t.max(f64::MIN_POSITIVE),
+        StopWhen::Strain(e) => {
+            let (w0, _) = program.phase_start_size;
+            let (w, _) = crate::boundary::walls::box_size(&world.walls);
+            (1.0 - w / w0) / e
+        }
+        StopWhen::Any(list) => {
+            return list
+                .iter()
+                .filter_map(|u| stop_fraction(u, program, world, phi, p_c, phi_start))
+                .fold(None, |acc: Option<f64>, f| {
+                    Some(acc.map_or(f, |a| a.max(f)))
+                });
+        }
+    };
+    f.is_finite().then_some(f.clamp(0.0, 1.0))
+}
+
+/// The progress bar of a run: appears after [`Progress::DELAY`], redrawn at most 10 times a
+/// second, hidden when stderr is not a terminal (indicatif's stderr target).
+struct Progress {
+    enabled: bool,
+    bar: Option<ProgressBar>,
+    phases: Vec<&'static str>,
+    phase_seen: Option<usize>,
+    phi_start: f64,
+    known: bool,
+    last_draw: Option<Instant>,
+}
+
+impl Progress {
+    const DELAY: Duration = Duration::from_secs(3);
+    const PERIOD: Duration = Duration::from_millis(100);
+
+    fn new(enabled: bool, phases: &[&'static str]) -> Self {
+        Self {
+            enabled,
+            bar: None,
+            phases: phases.to_vec(),
+            phase_seen: None,
+            phi_start: 0.0,
+            known: false,
+            last_draw: None,
+        }
+    }
+
+    fn bar_style() -> ProgressStyle {
+        ProgressStyle::with_template(
+            "{prefix} [{elapsed_precise}] {bar:30.cyan/blue} {percent:>3}%  {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ")
+    }
+
+    fn spinner_style() -> ProgressStyle {
+        ProgressStyle::with_template("{prefix} [{elapsed_precise}] {spinner}  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner())
+    }
+
+    fn update(
+        &mut self,
+        program: &LoadingProgram,
+        world: &World,
+        phi: f64,
+        p_c: f64,
+        started: Instant,
+    ) {
+        if !self.enabled {
+            return;
+        }
+        if self.phase_seen != Some(program.current) {
+            self.phase_seen = Some(program.current);
+            self.phi_start = phi;
+        }
+        let now = Instant::now();
+        if self.bar.is_none() {
+            if now.duration_since(started) < Self::DELAY {
+                return;
+            }
+            let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr())
+                .with_style(Self::spinner_style());
+            bar.set_elapsed(now.duration_since(started));
+            self.bar = Some(bar);
+        }
+        if self
+            .last_draw
+            .is_some_and(|t| now.duration_since(t) < Self::PERIOD)
+        {
+            return;
+        }
+        self.last_draw = Some(now);
+        let Some(bar) = &self.bar else { return };
+        let fraction = program
+            .phase()
+            .and_then(|p| stop_fraction(p.until(), program, world, phi, p_c, self.phi_start));
+        if fraction.is_some() != self.known {
+            self.known = fraction.is_some();
+            bar.set_style(if self.known {
+                Self::bar_style()
+            } else {
+                Self::spinner_style()
+            });
+        }
+        bar.set_prefix(format!(
+            "{} {}/{}",
+            program.phase().map_or("end", |p| p.name()),
+            (program.current + 1).min(self.phases.len()),
+            self.phases.len()
+        ));
+        if let Some(f) = fraction {
+            bar.set_position((f * 1000.0) as u64);
+        } else {
+            bar.tick();
+        }
+        let elapsed = now.duration_since(started).as_secs_f64().max(1e-9);
+        bar.set_message(format!(
+            "step {}  φ {:.4}  p_c {:.3e}  contacts {}  {:.2e} grain-steps/s",
+            world.step,
+            phi,
+            p_c,
+            world.totals.contacts,
+            world.step as f64 * world.grains.len() as f64 / elapsed
+        ));
+    }
+
+    fn suspend<R>(&self, f: impl FnOnce() -> R) -> R {
+        match &self.bar {
+            Some(bar) => bar.suspend(f),
+            None => f(),
+        }
+    }
+
+    fn finish(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::Result<()> {
@@ -256,6 +489,9 @@ fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::R
         s.max_loaded_inertial_number
     )?;
     writeln!(f, "neighbor_builds = {}", s.neighbor_builds)?;
+    if s.mcap_seconds > 0.0 {
+        writeln!(f, "mcap_write_seconds = {:.3}", s.mcap_seconds)?;
+    }
     if let Some((rms, n)) = s.eq69_rms_error {
         writeln!(f, "eq69_rms_relative_error = {rms:.4}")?;
         writeln!(f, "eq69_points = {n}")?;

@@ -1,0 +1,199 @@
+//! Frictionless rigid walls and the node-to-wall contact element (paper appendix C) with an
+//! augmented-Lagrangian multiplier per (wall, boundary node).
+//!
+//! For boundary node s1 with contour neighbours s0 and s2 (current positions), the gap to a
+//! wall through `p` with unit normal `n` (pointing to the side the grain lives on) is
+//! `g = (x_s1 - p) . n` (negative when it penetrates). The contact pressure is
+//! `T = <lambda - k g>` (the paper's `<-lambda - k g>` with lambda stored as a positive
+//! pressure) and acts on s1 as the force `T A_s n`, `A_s = (|s1 - s0| + |s2 - s1|)/2` (eq. 22,
+//! B.11). Its consistent linearisation is the paper's `K_c3 = k A_s n n^T` plus `K_c4`, the
+//! change of `A_s` with the positions of s0, s1, s2.
+
+use super::model::{Dense, DiscModel};
+
+/// A rigid, frictionless wall: the line through `point` with unit `normal` pointing to the side
+/// of the grain. Prescribed motion is done by moving `point` between steps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wall {
+    pub point: [f64; 2],
+    pub normal: [f64; 2],
+}
+
+impl Wall {
+    pub fn new(point: [f64; 2], normal: [f64; 2]) -> Self {
+        let l = (normal[0] * normal[0] + normal[1] * normal[1]).sqrt();
+        Self {
+            point,
+            normal: [normal[0] / l, normal[1] / l],
+        }
+    }
+
+    #[inline]
+    pub fn gap(&self, x: [f64; 2]) -> f64 {
+        (x[0] - self.point[0]) * self.normal[0] + (x[1] - self.point[1]) * self.normal[1]
+    }
+
+    /// Unit tangent, the normal turned by +90 degrees.
+    pub fn tangent(&self) -> [f64; 2] {
+        [-self.normal[1], self.normal[0]]
+    }
+}
+
+/// Multipliers (contact pressures, >= 0) for every wall and boundary node, `[wall][node]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Multipliers {
+    pub values: Vec<Vec<f64>>,
+}
+
+impl Multipliers {
+    pub fn zeros(walls: usize, boundary: usize) -> Self {
+        Self {
+            values: vec![vec![0.0; boundary]; walls],
+        }
+    }
+}
+
+/// Contact state of one wall after a solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WallState {
+    /// Pressure T of each boundary node (>= 0).
+    pub pressure: Vec<f64>,
+    /// Gap of each boundary node.
+    pub gap: Vec<f64>,
+    /// Tributary length A_s of each boundary node.
+    pub tributary: Vec<f64>,
+}
+
+impl WallState {
+    /// Total force the grain exerts on the wall (>= 0), `sum T A_s`.
+    pub fn force(&self) -> f64 {
+        self.pressure
+            .iter()
+            .zip(&self.tributary)
+            .map(|(t, a)| t * a)
+            .sum()
+    }
+}
+
+#[inline]
+fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+#[inline]
+fn norm(a: [f64; 2]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
+}
+
+/// Tributary length and the unit vectors s0->s1 and s1->s2 of boundary node `s`.
+fn tributary(model: &DiscModel, u: &[f64], s: usize) -> (f64, [f64; 2], [f64; 2], usize, usize) {
+    let nb = model.nodes.boundary_count;
+    let s0 = (s + nb - 1) % nb;
+    let s2 = (s + 1) % nb;
+    let d0 = sub(model.position(u, s), model.position(u, s0));
+    let d1 = sub(model.position(u, s2), model.position(u, s));
+    let (l0, l1) = (norm(d0), norm(d1));
+    (
+        0.5 * (l0 + l1),
+        [d0[0] / l0, d0[1] / l0],
+        [d1[0] / l1, d1[1] / l1],
+        s0,
+        s2,
+    )
+}
+
+/// Evaluates the wall contacts: subtracts the contact forces from `residual` (which holds
+/// `f_int - f_ext`), adds their linearisation to `tangent`, and returns the wall states.
+pub fn add_wall_contacts(
+    model: &DiscModel,
+    u: &[f64],
+    walls: &[Wall],
+    multipliers: &Multipliers,
+    stiffness: f64,
+    residual: &mut [f64],
+    mut tangent: Option<&mut Dense>,
+) -> Vec<WallState> {
+    let nb = model.nodes.boundary_count;
+    let mut states = Vec::with_capacity(walls.len());
+    for (w, wall) in walls.iter().enumerate() {
+        let n = wall.normal;
+        let mut st = WallState {
+            pressure: vec![0.0; nb],
+            gap: vec![0.0; nb],
+            tributary: vec![0.0; nb],
+        };
+        for s in 0..nb {
+            let g = wall.gap(model.position(u, s));
+            let lambda = multipliers.values[w][s];
+            let t = (lambda - stiffness * g).max(0.0);
+            st.gap[s] = g;
+            if t <= 0.0 {
+                continue;
+            }
+            let (a_s, t0, t1, s0, s2) = tributary(model, u, s);
+            st.pressure[s] = t;
+            st.tributary[s] = a_s;
+            residual[2 * s] -= t * a_s * n[0];
+            residual[2 * s + 1] -= t * a_s * n[1];
+            if let Some(k) = tangent.as_deref_mut() {
+                // d(residual_s)/du = -n ⊗ (A_s dT/du + T dA_s/du), dT/du_s = -k n.
+                for i in 0..2 {
+                    for j in 0..2 {
+                        let row = 2 * s + i;
+                        k.add(row, 2 * s + j, stiffness * a_s * n[i] * n[j]);
+                        k.add(row, 2 * s + j, -t * n[i] * 0.5 * (t0[j] - t1[j]));
+                        k.add(row, 2 * s0 + j, t * n[i] * 0.5 * t0[j]);
+                        k.add(row, 2 * s2 + j, -t * n[i] * 0.5 * t1[j]);
+                    }
+                }
+            }
+        }
+        states.push(st);
+    }
+    states
+}
+
+/// Length of the contact of a wall, measured along the wall (see [`contact_length`] docs).
+///
+/// The active nodes (T > 0) around the deepest node form the contact arc. Its ends lie between
+/// the last active node and the first free one; they are placed where the gap of the free nodes,
+/// extrapolated as `g ∝ s^(3/2)` (the shape of the gap just outside a smooth elastic contact),
+/// vanishes, clamped to that interval. Returns 0 when no node is active.
+pub fn contact_length(model: &DiscModel, u: &[f64], wall: &Wall, state: &WallState) -> f64 {
+    let nb = model.nodes.boundary_count;
+    let Some(centre) = (0..nb)
+        .filter(|&s| state.pressure[s] > 0.0)
+        .min_by(|&a, &b| state.gap[a].total_cmp(&state.gap[b]))
+    else {
+        return 0.0;
+    };
+    let tang = wall.tangent();
+    let coord = |s: usize| {
+        let x = model.position(u, s);
+        x[0] * tang[0] + x[1] * tang[1]
+    };
+    let mut ends = [0.0; 2];
+    for (e, dir) in [(0usize, 1isize), (1, -1)] {
+        let step = |s: usize| ((s as isize + dir).rem_euclid(nb as isize)) as usize;
+        let mut last = centre;
+        let mut count = 0;
+        while state.pressure[step(last)] > 0.0 && count < nb {
+            last = step(last);
+            count += 1;
+        }
+        let b = step(last);
+        let c = step(b);
+        let (sa, sb, sc) = (coord(last), coord(b), coord(c));
+        let (gb, gc) = (state.gap[b].max(0.0), state.gap[c].max(0.0));
+        let (pb, pc) = (gb.powf(2.0 / 3.0), gc.powf(2.0 / 3.0));
+        let mut se = if pc > pb {
+            sb - pb * (sc - sb) / (pc - pb)
+        } else {
+            0.5 * (sa + sb)
+        };
+        let (lo, hi) = if sa < sb { (sa, sb) } else { (sb, sa) };
+        se = se.clamp(lo, hi);
+        ends[e] = se;
+    }
+    (ends[0] - ends[1]).abs()
+}

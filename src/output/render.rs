@@ -1,0 +1,447 @@
+//! Pictures of a packing (`sdem render`): every grain drawn as its deformed contour, cut flat
+//! along the chords of its contacts, filled with the colour of its mean stress, with a colour
+//! bar — the kind of picture of the SDEM paper's figures 9 and 11.
+//!
+//! A grain's contour is the affine image of its reference circle (`center + A R u`); where two
+//! contours cross, the paper's grains meet along the straight chord PP'. Each grain is drawn as
+//! its contour polygon clipped by the line of each of its contacts (the part on its own side:
+//! `(x - x_c) . n <= 0` for the first grain of a pair, `>= 0` for the second) and by each wall.
+//! The chords come from the logged contacts; the contour resolution of the picture follows its
+//! pixel size (the chords are exact whatever the resolution).
+
+use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+use crate::output::mcap::{Frame, FrameGrain, stress_colour_max};
+use glam::DVec2;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+use std::sync::Once;
+
+/// DejaVu Sans, shipped so that text needs no system font (plotters' `ab_glyph` backend).
+pub static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+/// The family name under which [`FONT`] is registered.
+pub const FONT_FAMILY: &str = "sans-serif";
+
+/// Registers the shipped font with plotters (once per process).
+pub fn register_fonts() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The font is a valid TTF compiled into the binary; a failure would leave text out of
+        // the pictures, which plotters then reports as a drawing error.
+        let _ = plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, FONT);
+    });
+}
+
+/// Viridis colour map (matplotlib's default), `t` in [0, 1].
+pub fn viridis(t: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 9] = [
+        [68.0, 1.0, 84.0],
+        [72.0, 40.0, 120.0],
+        [62.0, 74.0, 137.0],
+        [49.0, 104.0, 142.0],
+        [38.0, 130.0, 142.0],
+        [31.0, 158.0, 137.0],
+        [53.0, 183.0, 121.0],
+        [109.0, 205.0, 89.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (STOPS.len() - 1) as f64;
+    let k = (x.floor() as usize).min(STOPS.len() - 2);
+    let f = x - k as f64;
+    let mut out = [0u8; 3];
+    for c in 0..3 {
+        out[c] = (STOPS[k][c] + f * (STOPS[k + 1][c] - STOPS[k][c])).round() as u8;
+    }
+    out
+}
+
+/// Clips a convex polygon to the half-plane `(x - point) . normal <= 0` (Sutherland–Hodgman).
+pub fn clip_half_plane(polygon: &[DVec2], point: DVec2, normal: DVec2) -> Vec<DVec2> {
+    let n = polygon.len();
+    let mut out = Vec::with_capacity(n + 2);
+    for k in 0..n {
+        let a = polygon[k];
+        let b = polygon[(k + 1) % n];
+        let da = (a - point).dot(normal);
+        let db = (b - point).dot(normal);
+        if da <= 0.0 {
+            out.push(a);
+        }
+        if (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0) {
+            out.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+    out
+}
+
+/// The outline of a grain: its contour polygon with `nodes` nodes, cut by each `(point,
+/// normal)` half-plane `(x - point) . normal <= 0`.
+pub fn grain_outline(grain: &FrameGrain, nodes: usize, cuts: &[(DVec2, DVec2)]) -> Vec<DVec2> {
+    let shape = grain.shape();
+    let nodes = nodes.max(8);
+    let mut polygon: Vec<DVec2> = (0..nodes)
+        .map(|k| {
+            let (s, c) = (k as f64 * std::f64::consts::TAU / nodes as f64).sin_cos();
+            shape.center + shape.map * DVec2::new(c, s)
+        })
+        .collect();
+    for &(point, normal) in cuts {
+        if polygon.len() < 3 {
+            break;
+        }
+        polygon = clip_half_plane(&polygon, point, normal);
+    }
+    polygon
+}
+
+/// The cuts of every grain of a frame: its contacts' chords and the walls it crosses.
+pub fn frame_cuts(frame: &Frame) -> Vec<Vec<(DVec2, DVec2)>> {
+    let mut cuts: Vec<Vec<(DVec2, DVec2)>> = vec![Vec::new(); frame.grains.len()];
+    for c in &frame.contacts {
+        let (i, j) = (c.first as usize, c.second as usize);
+        if i < cuts.len() && j < cuts.len() && c.normal.is_finite() && c.point.is_finite() {
+            cuts[i].push((c.point, c.normal));
+            cuts[j].push((c.point, -c.normal));
+        }
+    }
+    for (g, list) in frame.grains.iter().zip(cuts.iter_mut()) {
+        let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
+        for w in &frame.walls {
+            if w.height(g.center) < reach {
+                list.push((w.point, -w.normal));
+            }
+        }
+    }
+    cuts
+}
+
+/// How to draw a frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderOptions {
+    /// Pixels along the longer side of the box.
+    pub size: u32,
+    /// Top of the colour scale (compression positive); `None`: the frame's 99th percentile.
+    pub stress_max: Option<f64>,
+    /// First line of the caption (e.g. the scenario name).
+    pub title: String,
+    /// Part of the sample to show, `(lower left, upper right)`; `None`: the whole box.
+    pub region: Option<(DVec2, DVec2)>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            size: 1200,
+            stress_max: None,
+            title: String::new(),
+            region: None,
+        }
+    }
+}
+
+/// What was drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderInfo {
+    pub width: u32,
+    pub height: u32,
+    pub grains: usize,
+    pub stress_max: f64,
+}
+
+/// The region shown: the box of the four walls, or the grains' extent.
+fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) {
+    if let Some((a, b)) = region {
+        let (lo, hi) = (a.min(b), a.max(b));
+        if lo.is_finite() && hi.is_finite() && (hi - lo).min_element() > 0.0 {
+            return (lo, hi);
+        }
+    }
+    if frame.walls.len() == 4 {
+        let lo = DVec2::new(frame.walls[LEFT].point.x, frame.walls[BOTTOM].point.y);
+        let hi = DVec2::new(frame.walls[RIGHT].point.x, frame.walls[TOP].point.y);
+        if (hi - lo).min_element() > 0.0 && lo.is_finite() && hi.is_finite() {
+            return (lo, hi);
+        }
+    }
+    let mut lo = DVec2::splat(f64::INFINITY);
+    let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    for g in &frame.grains {
+        let r = g.radius * (1.0 + g.eps1.max(g.eps2).max(0.0));
+        lo = lo.min(g.center - DVec2::splat(r));
+        hi = hi.max(g.center + DVec2::splat(r));
+    }
+    if !(lo.is_finite() && hi.is_finite()) || (hi - lo).min_element() <= 0.0 {
+        return (DVec2::ZERO, DVec2::ONE);
+    }
+    (lo, hi)
+}
+
+/// Draws frame `frame` into `path` (PNG, or SVG if the name ends in `.svg`).
+pub fn render_frame(
+    frame: &Frame,
+    path: &Path,
+    options: &RenderOptions,
+) -> Result<RenderInfo, String> {
+    register_fonts();
+    if frame.grains.is_empty() {
+        return Err("the frame has no grains".into());
+    }
+    frame.check()?;
+    let (lo, hi) = view_bounds(frame, options.region);
+    let extent = hi - lo;
+    let size = options.size.clamp(100, 20_000) as f64;
+    let scale = size / extent.max_element();
+    let box_w = (extent.x * scale).round().max(1.0) as u32;
+    let box_h = (extent.y * scale).round().max(1.0) as u32;
+    let margin = 16u32;
+    let caption_h = 64u32;
+    let bar_w = 170u32;
+    let width = margin + box_w + margin + bar_w;
+    let height = caption_h + box_h + margin;
+    let means: Vec<f64> = frame.grains.iter().map(|g| g.mean_stress_c()).collect();
+    let stress_max = options
+        .stress_max
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .unwrap_or_else(|| stress_colour_max(&means));
+    let layout = Layout {
+        lo,
+        hi,
+        scale,
+        origin: (margin as i32, caption_h as i32),
+        box_h,
+        box_w,
+        stress_max,
+    };
+    let is_svg = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    if is_svg {
+        let root = SVGBackend::new(path, (width, height)).into_drawing_area();
+        draw(&root, frame, &means, &layout, options)?;
+        root.present().map_err(|e| e.to_string())?;
+    } else {
+        let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+        draw(&root, frame, &means, &layout, options)?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(RenderInfo {
+        width,
+        height,
+        grains: frame.grains.len(),
+        stress_max,
+    })
+}
+
+struct Layout {
+    lo: DVec2,
+    hi: DVec2,
+    scale: f64,
+    origin: (i32, i32),
+    box_w: u32,
+    box_h: u32,
+    stress_max: f64,
+}
+
+impl Layout {
+    fn pixel(&self, x: DVec2) -> (i32, i32) {
+        let p = (x - self.lo) * self.scale;
+        (
+            self.origin.0 + p.x.round() as i32,
+            self.origin.1 + self.box_h as i32 - p.y.round() as i32,
+        )
+    }
+}
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    frame: &Frame,
+    means: &[f64],
+    layout: &Layout,
+    options: &RenderOptions,
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(err)?;
+    let cuts = frame_cuts(frame);
+    // Contour nodes: about one per 2 pixels of perimeter, at most 360.
+    let outline = RGBColor(25, 25, 25);
+    // The view's edges cut every grain too (no drawing outside the picture's box).
+    let view = [
+        (layout.lo, -DVec2::X),
+        (layout.lo, -DVec2::Y),
+        (layout.hi, DVec2::X),
+        (layout.hi, DVec2::Y),
+    ];
+    for (k, g) in frame.grains.iter().enumerate() {
+        let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
+        let r_px = reach * layout.scale;
+        if !r_px.is_finite() || (g.center - g.center.clamp(layout.lo, layout.hi)).length() > reach {
+            continue;
+        }
+        let nodes = (std::f64::consts::PI * r_px).clamp(12.0, 360.0) as usize;
+        let mut polygon = grain_outline(g, nodes, &cuts[k]);
+        for &(point, normal) in &view {
+            if polygon.len() < 3 {
+                break;
+            }
+            polygon = clip_half_plane(&polygon, point, normal);
+        }
+        if polygon.len() < 3 {
+            continue;
+        }
+        let pixels: Vec<(i32, i32)> = polygon.iter().map(|&x| layout.pixel(x)).collect();
+        let t = if layout.stress_max > 0.0 {
+            means[k] / layout.stress_max
+        } else {
+            0.0
+        };
+        let [r, gg, b] = viridis(t);
+        root.draw(&Polygon::new(pixels.clone(), RGBColor(r, gg, b).filled()))
+            .map_err(err)?;
+        if r_px >= 4.0 {
+            let mut closed = pixels;
+            closed.push(closed[0]);
+            root.draw(&PathElement::new(closed, outline.stroke_width(1)))
+                .map_err(err)?;
+        }
+    }
+    // The box.
+    let (x0, y0) = layout.origin;
+    root.draw(&Rectangle::new(
+        [
+            (x0, y0),
+            (x0 + layout.box_w as i32, y0 + layout.box_h as i32),
+        ],
+        BLACK.stroke_width(2),
+    ))
+    .map_err(err)?;
+
+    // Caption.
+    let font = |size: u32| (FONT_FAMILY, size).into_font().color(&BLACK);
+    let mut line2 = format!("step {}   t = {:.4e}", frame.step, frame.time);
+    if let Some(m) = &frame.measures {
+        line2.push_str(&format!(
+            "   φ = {:.4}   p_c = {:.3e}   z = {:.2}   contacts {}",
+            m.phi, m.p_c, m.z, m.contacts
+        ));
+    }
+    let title = if options.title.is_empty() {
+        format!("{} grains", frame.grains.len())
+    } else {
+        format!("{} — {} grains", options.title, frame.grains.len())
+    };
+    root.draw_text(&title, &font(22), (x0, 8)).map_err(err)?;
+    root.draw_text(&line2, &font(17), (x0, 36)).map_err(err)?;
+
+    // Colour bar.
+    let bar_x = x0 + layout.box_w as i32 + 24;
+    let bar_top = y0 + 40;
+    let bar_h = (layout.box_h as i32 - 60).max(100);
+    let bar_w = 26;
+    let steps = 256;
+    for s in 0..steps {
+        let t0 = s as f64 / steps as f64;
+        let ya = bar_top + bar_h - ((s + 1) as f64 / steps as f64 * bar_h as f64).round() as i32;
+        let yb = bar_top + bar_h - (t0 * bar_h as f64).round() as i32;
+        let [r, g, b] = viridis(t0 + 0.5 / steps as f64);
+        root.draw(&Rectangle::new(
+            [(bar_x, ya), (bar_x + bar_w, yb)],
+            RGBColor(r, g, b).filled(),
+        ))
+        .map_err(err)?;
+    }
+    root.draw(&Rectangle::new(
+        [(bar_x, bar_top), (bar_x + bar_w, bar_top + bar_h)],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(err)?;
+    root.draw_text("mean stress", &font(15), (bar_x - 14, y0))
+        .map_err(err)?;
+    root.draw_text("(compression +)", &font(13), (bar_x - 14, y0 + 18))
+        .map_err(err)?;
+    let ticks = 5;
+    for k in 0..=ticks {
+        let f = k as f64 / ticks as f64;
+        let y = bar_top + bar_h - (f * bar_h as f64).round() as i32;
+        root.draw(&PathElement::new(
+            vec![(bar_x + bar_w, y), (bar_x + bar_w + 5, y)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(err)?;
+        let value = f * layout.stress_max;
+        let label = if k == ticks && layout.stress_max > 0.0 {
+            format!("≥ {value:.2e}")
+        } else {
+            format!("{value:.2e}")
+        };
+        root.draw_text(&label, &font(14), (bar_x + bar_w + 8, y - 7))
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clipping_a_square_by_a_half_plane() {
+        let square = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        let cut = clip_half_plane(&square, DVec2::new(0.5, 0.0), DVec2::X);
+        let area = |p: &[DVec2]| {
+            0.5 * (0..p.len())
+                .map(|k| p[k].perp_dot(p[(k + 1) % p.len()]))
+                .sum::<f64>()
+        };
+        assert!((area(&cut) - 0.5).abs() < 1e-12);
+        assert!(cut.iter().all(|x| x.x <= 0.5 + 1e-12));
+    }
+
+    #[test]
+    fn two_touching_discs_share_a_flat_chord() {
+        // Two unit discs 1.8 apart: cut at x = 0.9, both outlines end on the chord line.
+        let a = FrameGrain {
+            radius: 1.0,
+            ..Default::default()
+        };
+        let b = FrameGrain {
+            center: DVec2::new(1.8, 0.0),
+            ..a
+        };
+        let point = DVec2::new(0.9, 0.0);
+        let pa = grain_outline(&a, 360, &[(point, DVec2::X)]);
+        let pb = grain_outline(&b, 360, &[(point, -DVec2::X)]);
+        let max_a = pa.iter().map(|p| p.x).fold(f64::MIN, f64::max);
+        let min_b = pb.iter().map(|p| p.x).fold(f64::MAX, f64::min);
+        assert!((max_a - 0.9).abs() < 1e-12 && (min_b - 0.9).abs() < 1e-12);
+        // The flat segment is the chord: half-length sqrt(1 - 0.81).
+        let on_chord: Vec<f64> = pa
+            .iter()
+            .filter(|p| (p.x - 0.9).abs() < 1e-12)
+            .map(|p| p.y)
+            .collect();
+        let half = (1.0f64 - 0.81).sqrt();
+        let span = on_chord.iter().fold(f64::MIN, |m, &y| m.max(y))
+            - on_chord.iter().fold(f64::MAX, |m, &y| m.min(y));
+        assert!((span - 2.0 * half).abs() < 1e-3, "{span}");
+    }
+
+    #[test]
+    fn viridis_ends() {
+        assert_eq!(viridis(0.0), [68, 1, 84]);
+        assert_eq!(viridis(1.0), [253, 231, 37]);
+        assert_eq!(viridis(f64::NAN), [68, 1, 84]);
+    }
+}
