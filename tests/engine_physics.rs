@@ -248,13 +248,8 @@ fn results_are_bitwise_identical_with_one_and_two_threads() {
         pool.install(|| {
             let mut grains = Vec::new();
             // 40 x 30 lattice of slightly overlapping, randomly sized grains in a box.
-            let mut seed = 7u64;
-            let mut next = || {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (seed >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+            let mut next = || sdem::sample::unit_random(&mut rng);
             for i in 0..40 {
                 for j in 0..30 {
                     let r = 0.0105 + 0.001 * next();

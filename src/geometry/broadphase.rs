@@ -156,13 +156,8 @@ mod tests {
 
     #[test]
     fn finds_exactly_the_pairs_of_a_brute_force_search() {
-        let mut state = 12345u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(12345);
+        let mut next = || crate::sample::unit_random(&mut rng);
         let centers: Vec<DVec2> = (0..500)
             .map(|_| DVec2::new(next() * 3.0, next() * 2.0))
             .collect();

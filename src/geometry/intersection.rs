@@ -673,13 +673,8 @@ mod tests {
         // Expectation: the O(1) cap area and depth and the galloping chain search give what a
         // node-by-node pass over the whole contour gives, for random ellipses in any overlap.
         let table = ContourTable::new(1.0);
-        let mut state = 99u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(99);
+        let mut next = || crate::sample::unit_random(&mut rng);
         let mut checked = 0;
         for _ in 0..400 {
             let i = GrainShape::new(

@@ -419,14 +419,7 @@ impl FrameGrain {
     }
 
     pub fn shape(&self) -> GrainShape {
-        GrainShape::new(
-            self.center,
-            self.radius,
-            self.theta,
-            self.eps1,
-            self.eps2,
-            self.alpha,
-        )
+        self.grain().shape()
     }
 
     /// Mean stress, compression positive: `-(sxx + syy) / 2`.

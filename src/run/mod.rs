@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 pub enum RunError {
     #[error(transparent)]
     Sample(#[from] SampleError),
-    #[error("writing {path}: {source}")]
+    #[error("writing {path}")]
     Output {
         path: String,
         source: std::io::Error,
