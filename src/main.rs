@@ -5,7 +5,8 @@ use clap::{Parser, Subcommand};
 use sdem::output::mcap::{McapSettings, TOPIC_GRAINS, Trajectory};
 use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
-use sdem::run::{RunOptions, run_scenario};
+use sdem::run::checkpoint::Checkpoint;
+use sdem::run::{RunOptions, resume_run, run_scenario};
 use sdem::scenario::Scenario;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -44,6 +45,31 @@ enum Command {
         /// to 10^4 grains, every ceil(N/10^4)-th frame above).
         #[arg(long, value_name = "K", requires = "mcap")]
         mcap_scene_every: Option<u64>,
+        /// Keep the latest checkpoint in DIR/checkpoint.bin, written every STEPS steps, on
+        /// Ctrl-C / SIGTERM (then the run stops) and at the end (see `sdem resume`).
+        #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
+    },
+    /// Continue a run from its checkpoint (written by `sdem run --checkpoint-every`):
+    /// macro.csv goes on from the checkpoint's step without missing or repeated rows.
+    Resume {
+        /// The checkpoint, e.g. out/isotropic_A/checkpoint.bin.
+        checkpoint: PathBuf,
+        /// Output directory (default: the checkpoint's directory).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores). Results are identical for any count.
+        #[arg(long)]
+        threads: Option<usize>,
+        /// No progress lines.
+        #[arg(long)]
+        quiet: bool,
+        /// Write the continued part of the trajectory as a new MCAP log.
+        #[arg(long, value_name = "FILE")]
+        mcap: Option<PathBuf>,
+        /// Checkpoint interval (default: the interrupted run's).
+        #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
     },
     /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree).
     Bench {
@@ -187,6 +213,7 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
             mcap,
             mcap_scene_every,
+            checkpoint_every,
         } => {
             let parsed = load(&scenario)?;
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
@@ -210,42 +237,51 @@ fn run(cli: Cli) -> Result<()> {
                     path,
                     scene_every: mcap_scene_every,
                 }),
+                checkpoint_every: checkpoint_every.unwrap_or(0),
+                stop: checkpoint_every.map(|_| stop_signals::install()),
+                stop_after_step: None,
             };
             let summary = pool.install(|| run_scenario(&parsed, &options))?;
+            report(&summary, &options, &out_dir);
+        }
+        Command::Resume {
+            checkpoint,
+            out,
+            threads,
+            quiet,
+            mcap,
+            checkpoint_every,
+        } => {
+            let saved = Checkpoint::read(&checkpoint)?;
+            let out_dir = out.unwrap_or_else(|| match checkpoint.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => PathBuf::from("."),
+            });
+            let pool = thread_pool(threads)?;
             eprintln!(
-                "done: {} steps in {:.1} s ({:.3e} grain-steps/s)",
-                summary.steps,
-                summary.wall_seconds,
-                summary.steps as f64 * summary.grains as f64 / summary.wall_seconds.max(1e-9)
+                "sdem: resuming {} at step {} (t = {:.4e}), {} threads, output in {}",
+                saved.scenario.name,
+                saved.step,
+                saved.time,
+                pool.current_num_threads(),
+                out_dir.display()
             );
-            if let Some(j) = summary.jamming {
-                eprintln!(
-                    "jamming: step {}, phi_0 = {:.4}, z_0 = {:.3}, z_nr_0 = {:.3}",
-                    j.step, j.phi, j.z, j.z_nr
-                );
-            }
-            if let Some((rms, n)) = summary.eq69_rms_error {
-                eprintln!(
-                    "eq. 69 (Cantor et al. 2020) with this run's phi_0, Z_0: RMS relative error {:.1}% over {n} rows",
-                    100.0 * rms
-                );
-            }
-            eprintln!(
-                "final: phi = {:.4}, p_c = {:.4e}; see {}",
-                summary.last.phi,
-                summary.last.p_c,
-                out_dir.join("macro.csv").display()
-            );
-            if let Some(m) = &options.mcap {
-                let bytes = std::fs::metadata(&m.path).map(|m| m.len()).unwrap_or(0);
-                eprintln!(
-                    "trajectory log: {} ({:.1} MB; {:.2} s writing it, {:.1}% of the run)",
-                    m.path.display(),
-                    bytes as f64 / 1e6,
-                    summary.mcap_seconds,
-                    100.0 * summary.mcap_seconds / summary.wall_seconds.max(1e-9)
-                );
-            }
+            let terminal = std::io::stderr().is_terminal();
+            let every = checkpoint_every.unwrap_or(saved.checkpoint_every);
+            let options = RunOptions {
+                out_dir: out_dir.clone(),
+                progress_seconds: (!quiet && !terminal).then_some(30.0),
+                progress_bar: !quiet && terminal,
+                mcap: mcap.map(|path| McapSettings {
+                    path,
+                    scene_every: None,
+                }),
+                checkpoint_every: every,
+                stop: (every > 0).then(stop_signals::install),
+                stop_after_step: None,
+            };
+            let summary = pool.install(|| resume_run(&saved, &checkpoint, &options))?;
+            report(&summary, &options, &out_dir);
         }
         Command::Bench {
             grains,
@@ -367,6 +403,88 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The end-of-run lines on stderr.
+fn report(summary: &sdem::run::RunSummary, options: &RunOptions, out_dir: &Path) {
+    eprintln!(
+        "done: {} steps in {:.1} s ({:.3e} grain-steps/s)",
+        summary.steps,
+        summary.wall_seconds,
+        summary.steps as f64 * summary.grains as f64 / summary.wall_seconds.max(1e-9)
+    );
+    if let Some(j) = summary.jamming {
+        eprintln!(
+            "jamming: step {}, phi_0 = {:.4}, z_0 = {:.3}, z_nr_0 = {:.3}",
+            j.step, j.phi, j.z, j.z_nr
+        );
+    }
+    if let Some((rms, n)) = summary.eq69_rms_error {
+        eprintln!(
+            "eq. 69 (Cantor et al. 2020) with this run's phi_0, Z_0: RMS relative error {:.1}% over {n} rows",
+            100.0 * rms
+        );
+    }
+    eprintln!(
+        "final: phi = {:.4}, p_c = {:.4e}; see {}",
+        summary.last.phi,
+        summary.last.p_c,
+        out_dir.join("macro.csv").display()
+    );
+    if let Some(m) = &options.mcap {
+        let bytes = std::fs::metadata(&m.path).map(|m| m.len()).unwrap_or(0);
+        eprintln!(
+            "trajectory log: {} ({:.1} MB; {:.2} s writing it, {:.1}% of the run)",
+            m.path.display(),
+            bytes as f64 / 1e6,
+            summary.mcap_seconds,
+            100.0 * summary.mcap_seconds / summary.wall_seconds.max(1e-9)
+        );
+    }
+}
+
+/// Ctrl-C / SIGTERM during a checkpointed run: the first stops the run after the current step
+/// (a checkpoint is written); a second ends the process at once. Uses the C library's
+/// `signal(2)` directly (std links it), so no extra crate.
+mod stop_signals {
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    static STOP: AtomicBool = AtomicBool::new(false);
+
+    #[cfg(unix)]
+    mod sys {
+        unsafe extern "C" {
+            pub fn signal(signum: i32, handler: usize) -> usize;
+            pub fn _exit(code: i32) -> !;
+        }
+        pub const SIGINT: i32 = 2;
+        pub const SIGTERM: i32 = 15;
+    }
+
+    #[cfg(unix)]
+    extern "C" fn on_signal(_signum: i32) {
+        // Only async-signal-safe work: an atomic swap, and _exit on the second signal.
+        if STOP.swap(true, Ordering::SeqCst) {
+            unsafe { sys::_exit(130) }
+        }
+    }
+
+    /// Installs the handlers (once) and returns the flag they set.
+    pub fn install() -> &'static AtomicBool {
+        #[cfg(unix)]
+        {
+            static INSTALLED: std::sync::Once = std::sync::Once::new();
+            INSTALLED.call_once(|| {
+                let handler = on_signal as extern "C" fn(i32) as usize;
+                // SAFETY: the handler only touches an atomic and calls _exit.
+                unsafe {
+                    sys::signal(sys::SIGINT, handler);
+                    sys::signal(sys::SIGTERM, handler);
+                }
+            });
+        }
+        &STOP
+    }
 }
 
 /// `sdem inspect`: what a trajectory log holds.

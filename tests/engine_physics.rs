@@ -31,7 +31,7 @@ fn squeezed_grain(poisson: f64, r: f64, gap: f64, tilt: f64) -> World {
         Wall::new(n * (0.5 * gap), -n),
     ];
     World::new(
-        params(poisson, 0.2, r),
+        params(poisson, 0.4, r),
         vec![Grain::at_rest(DVec2::ZERO, r)],
         walls,
     )
@@ -164,7 +164,7 @@ fn cluster(rotation: f64, level: ModelLevel) -> World {
         g.velocity = q * g.velocity;
         g.theta += rotation;
     }
-    let mut p = params(0.3, 0.2, 0.9);
+    let mut p = params(0.3, 0.4, 0.9);
     p.level = level;
     World::new(p, grains, Vec::new())
 }
@@ -260,7 +260,7 @@ fn results_are_bitwise_identical_with_one_and_two_threads() {
                 }
             }
             let walls = box_walls(0.0105, 0.8095, 0.0105, 0.6095);
-            let mut world = World::new(params(0.5, 0.2, 0.0105), grains, walls);
+            let mut world = World::new(params(0.5, 0.4, 0.0105), grains, walls);
             for _ in 0..100 {
                 world.step().unwrap();
             }
@@ -281,7 +281,7 @@ fn volumetric_and_full_levels_agree_under_isotropic_load() {
     // Expectation (SPEC §1): under an exactly isotropic load the full grain stays circular, so
     // level 1 (eps1 = eps2) and level 3 give the same state. Four walls squeeze one grain.
     let make = |level| {
-        let mut p = params(0.3, 0.2, 0.5);
+        let mut p = params(0.3, 0.4, 0.5);
         p.level = level;
         World::new(
             p,
@@ -325,7 +325,7 @@ fn stress_servo_brings_the_wall_stresses_to_their_targets() {
     use sdem::output::Measures;
     let r = 0.5;
     let mut world = World::new(
-        params(0.3, 0.2, r),
+        params(0.3, 0.4, r),
         vec![Grain::at_rest(DVec2::ZERO, r)],
         box_walls(-0.5, 0.5, -0.5, 0.5),
     );

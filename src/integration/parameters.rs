@@ -48,10 +48,13 @@ impl Parameters {
 pub struct StiffestModes {
     /// Principal-strain mode: `(2/R) sqrt((mu + kappa)/rho)` (mu alone when incompressible).
     pub deformation: f64,
-    /// Contact mode at the initial contact stiffness `k = E/a`, between two such grains, counting
-    /// the coupling of the contact force to the strain DoF through the Love–Weber stress
-    /// (generalized mass m R^2 / 4 at lever arm R: four times the translational response):
-    /// `sqrt(k (1/m_eff) (1 + 4))`, m_eff = m/2.
+    /// Contact mode at the initial contact stiffness `k = E/a` in a dense packing:
+    /// `sqrt(4 * coupling * 2k/m)`. Between two grains the mode is `sqrt(2k/m)` (m_eff = m/2);
+    /// `coupling` = 1 + 4 counts the push of a contact force on the strain DoF through the
+    /// Love–Weber stress (generalized mass m R^2/4 at lever arm R: four times the translational
+    /// response; 1 for rigid grains); the factor 4 is the stiffest lattice mode of a grain with
+    /// six contacts, measured: the dense `sdem bench` packing goes unstable between 0.5 and 0.55
+    /// of the single-contact estimate (tests/stability.rs).
     pub contact: f64,
 }
 
@@ -63,7 +66,7 @@ pub fn stiffest_modes(
 ) -> StiffestModes {
     let mass = material.density * std::f64::consts::PI * radius * radius;
     let coupling = if level == ModelLevel::Rigid { 1.0 } else { 5.0 };
-    let contact = (law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
+    let contact = (4.0 * law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
     let deformation = if level == ModelLevel::Rigid {
         0.0
     } else {

@@ -18,6 +18,39 @@ impl MacroWriter {
         Ok(Self { out })
     }
 
+    /// Continues a `macro.csv` after its first `rows` data rows: anything after them (rows
+    /// written after a checkpoint, a partly written line) is cut off, then rows are appended.
+    /// Fails if the file has another header or fewer than `rows` complete rows.
+    pub fn resume(path: &Path, rows: u64) -> std::io::Result<Self> {
+        let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
+        let bytes = std::fs::read(path)?;
+        let mut end = 0usize;
+        let mut lines = 0u64;
+        while lines < rows + 1 {
+            match bytes[end..].iter().position(|&b| b == b'\n') {
+                Some(k) => {
+                    if lines == 0 && &bytes[..end + k] != Measures::HEADER.as_bytes() {
+                        return Err(bad("not a macro.csv of this sdem (header differs)".into()));
+                    }
+                    end += k + 1;
+                    lines += 1;
+                }
+                None => {
+                    return Err(bad(format!(
+                        "it has {} complete rows",
+                        lines.saturating_sub(1)
+                    )));
+                }
+            }
+        }
+        let file = std::fs::OpenOptions::new().write(true).open(path)?;
+        file.set_len(end as u64)?;
+        let file = std::fs::OpenOptions::new().append(true).open(path)?;
+        Ok(Self {
+            out: BufWriter::new(file),
+        })
+    }
+
     pub fn write(&mut self, row: &Measures) -> std::io::Result<()> {
         writeln!(self.out, "{}", row.csv_row())?;
         self.out.flush()

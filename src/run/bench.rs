@@ -62,7 +62,7 @@ pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
     };
     let mut params = Parameters::new(material, 0.0);
     params.resolution_deg = resolution_deg;
-    params.dt = 0.2 * critical_time_step(&material, &params.law, 0.5 * spacing, params.level);
+    params.dt = 0.4 * critical_time_step(&material, &params.law, 0.5 * spacing, params.level);
     World::new(params, list, box_walls(0.0, width, 0.0, height))
 }
 

@@ -2,6 +2,7 @@
 //! write the measures.
 
 pub mod bench;
+pub mod checkpoint;
 
 use crate::boundary::loading::{LoadingProgram, StopWhen};
 use crate::boundary::walls::box_walls;
@@ -12,11 +13,13 @@ use crate::output::reference::CantorReference;
 use crate::output::{MacroWriter, Measures, write_grains_csv};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
+use checkpoint::{Checkpoint, CheckpointError, RunnerState};
 use glam::DVec2;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 #[derive(Debug, thiserror::Error)]
@@ -36,6 +39,12 @@ pub enum RunError {
     },
     #[error("could not start {threads} threads: {message}")]
     Threads { threads: usize, message: String },
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("{0}")]
+    Resume(String),
+    #[error("stopped at step {step}; continue with `sdem resume {checkpoint}`")]
+    Interrupted { step: u64, checkpoint: String },
 }
 
 /// Where the sample jammed (SPEC §7): the first state with p_c above p_jam.
@@ -77,6 +86,14 @@ pub struct RunOptions {
     /// Show a progress bar on stderr once the run has lasted a few seconds; drawn only when
     /// stderr is a terminal.
     pub progress_bar: bool,
+    /// Keep the latest checkpoint in `out_dir/checkpoint.bin`, written every this many steps
+    /// and at the end of the run (0: none). See [`checkpoint`].
+    pub checkpoint_every: u64,
+    /// Set (e.g. by a signal handler) to stop the run cleanly: a checkpoint is written after
+    /// the current step and the run ends with [`RunError::Interrupted`].
+    pub stop: Option<&'static AtomicBool>,
+    /// Stop cleanly after this step, as on a signal (a checkpoint is written).
+    pub stop_after_step: Option<u64>,
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
@@ -106,8 +123,101 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
 /// `summary.txt` in `options.out_dir`.
 pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSummary, RunError> {
     let out = &options.out_dir;
-    let mut world = build_world(scenario)?;
+    let world = build_world(scenario)?;
     std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let macro_path = out.join("macro.csv");
+    let writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;
+    let program = LoadingProgram::new(scenario.loading.clone(), &world.walls);
+    let runner = RunnerState {
+        last_good: world.grains.clone(),
+        ..Default::default()
+    };
+    run_loop(scenario, world, program, runner, writer, options)
+}
+
+/// Continues the run of a checkpoint (see [`checkpoint`]) in `options.out_dir`: `macro.csv`
+/// there is cut back to the rows written up to the checkpoint's step, then appended to. When
+/// the output directory has no `macro.csv` but `checkpoint_path`'s directory has one, it is
+/// copied first. An MCAP log (if asked for) holds the continued part only.
+pub fn resume_run(
+    checkpoint: &Checkpoint,
+    checkpoint_path: &Path,
+    options: &RunOptions,
+) -> Result<RunSummary, RunError> {
+    let c = checkpoint;
+    if c.complete {
+        return Err(RunError::Resume(format!(
+            "{}: the run finished at step {}; there is nothing to resume",
+            checkpoint_path.display(),
+            c.step
+        )));
+    }
+    let scenario = &c.scenario;
+    let out = &options.out_dir;
+    std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let macro_path = out.join("macro.csv");
+    if !macro_path.exists() {
+        let source = checkpoint_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("macro.csv");
+        if source.exists() {
+            std::fs::copy(&source, &macro_path).map_err(io_error(&macro_path))?;
+        }
+    }
+    let writer = MacroWriter::resume(&macro_path, c.runner.macro_rows).map_err(|e| {
+        RunError::Resume(format!(
+            "{}: cannot continue it from the checkpoint's {} rows: {e}",
+            macro_path.display(),
+            c.runner.macro_rows
+        ))
+    })?;
+    let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
+    world.time = c.time;
+    world.step = c.step;
+    world.totals = c.totals;
+    run_loop(
+        scenario,
+        world,
+        c.program.clone(),
+        c.runner.clone(),
+        writer,
+        options,
+    )
+}
+
+fn snapshot(
+    scenario: &Scenario,
+    world: &World,
+    program: &LoadingProgram,
+    runner: &RunnerState,
+    complete: bool,
+    checkpoint_every: u64,
+) -> Checkpoint {
+    Checkpoint {
+        scenario: scenario.clone(),
+        complete,
+        checkpoint_every,
+        step: world.step,
+        time: world.time,
+        grains: world.grains.clone(),
+        walls: world.walls.clone(),
+        totals: world.totals,
+        program: program.clone(),
+        runner: runner.clone(),
+    }
+}
+
+/// The run loop, from a fresh or a resumed state.
+fn run_loop(
+    scenario: &Scenario,
+    mut world: World,
+    mut program: LoadingProgram,
+    mut r: RunnerState,
+    mut writer: MacroWriter,
+    options: &RunOptions,
+) -> Result<RunSummary, RunError> {
+    let out = &options.out_dir;
     let mut log = match &options.mcap {
         Some(settings) => Some(
             TrajectoryWriter::create(settings, scenario, &world)
@@ -123,29 +233,25 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
             .unwrap_or_default();
         io_error(&path)(e.into())
     };
+    let checkpoint_path = out.join(checkpoint::FILE_NAME);
+    let write_checkpoint = |c: Checkpoint| {
+        c.write_atomic(&checkpoint_path)
+            .map_err(io_error(&checkpoint_path))
+    };
     let mut mcap_seconds = 0.0;
     let mut progress = Progress::new(options.progress_bar, &program_phases(scenario));
     let started = Instant::now();
     let macro_path = out.join("macro.csv");
-    let mut writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;
-    let mut program = LoadingProgram::new(scenario.loading.clone(), &world.walls);
     let mean_diameter =
         2.0 * world.grains.iter().map(|g| g.radius).sum::<f64>() / world.grains.len() as f64;
     let young = scenario.material.young;
     let p_jam = scenario.output.jamming_pressure * young;
     let every = scenario.output.every;
-    let mut confirmed_jamming: Option<Jamming> = None;
-    let mut candidate: Option<Jamming> = None;
-    let mut last_good = world.grains.clone();
-    let mut last_good_step = 0;
-    let mut max_loaded_inertial_number: f64 = 0.0;
     let mut last_progress = Instant::now();
     let mut last_row = Measures::of(&world, "start", 0.0, mean_diameter);
-    // (phi, p_c) of the rows written in isotropic phases, for the eq. 69 comparison.
-    let mut isotropic_curve: Vec<(f64, f64)> = Vec::new();
 
     while !program.finished() {
-        let state = Measures::load_state(&world, confirmed_jamming.is_some(), mean_diameter);
+        let state = Measures::load_state(&world, r.confirmed_jamming.is_some(), mean_diameter);
         program.drive(&mut world.walls, &state);
         let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
         let rate = program.rate;
@@ -153,13 +259,13 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
             progress.finish();
             let state_file = out.join("grains_last_good.csv");
             let mut snapshot = world.clone();
-            snapshot.grains = last_good;
+            snapshot.grains = r.last_good;
             write_grains_csv(&state_file, &snapshot).map_err(io_error(&state_file))?;
             if let Some(log) = log.take() {
                 let outcome: BTreeMap<String, String> = [
                     ("status", "unstable".to_string()),
                     ("instability", instability.to_string()),
-                    ("last_good_step", last_good_step.to_string()),
+                    ("last_good_step", r.last_good_step.to_string()),
                 ]
                 .into_iter()
                 .map(|(k, v)| (k.to_string(), v))
@@ -168,25 +274,26 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
             }
             return Err(RunError::Unstable {
                 instability,
-                last_good_step,
+                last_good_step: r.last_good_step,
                 state_file: state_file.display().to_string(),
             });
         }
-        let state = Measures::load_state(&world, confirmed_jamming.is_some(), mean_diameter);
+        let state = Measures::load_state(&world, r.confirmed_jamming.is_some(), mean_diameter);
         let p_c = state.mean_stress();
         let mut write_row = world.step % every == 0;
         if p_c > 1e-4 * young {
-            max_loaded_inertial_number =
-                max_loaded_inertial_number.max(state.inertial_number(rate));
+            r.max_loaded_inertial_number = r
+                .max_loaded_inertial_number
+                .max(state.inertial_number(rate));
         }
         // Jamming (SPEC §7) is the first state with p_c > p_jam that carries on: a collision
         // in the loose gas can lift p_c over p_jam for a few steps, so a candidate is only
         // confirmed once p_c has stayed above p_jam for `every` steps.
-        if confirmed_jamming.is_none() {
-            match candidate {
+        if r.confirmed_jamming.is_none() {
+            match r.candidate {
                 None if p_c > p_jam => {
                     let (z, z_nr) = world.coordination();
-                    candidate = Some(Jamming {
+                    r.candidate = Some(Jamming {
                         step: world.step,
                         phi: state.phi,
                         z,
@@ -194,16 +301,15 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
                         p_c,
                     });
                 }
-                Some(_) if p_c <= p_jam => candidate = None,
+                Some(_) if p_c <= p_jam => r.candidate = None,
                 Some(c) if world.step >= c.step + every => {
-                    confirmed_jamming = candidate;
+                    r.confirmed_jamming = r.candidate;
                     write_row = true;
                 }
                 _ => {}
             }
         }
-        let jamming = confirmed_jamming;
-        let jammed = jamming.is_some();
+        let jammed = r.confirmed_jamming.is_some();
         let state = crate::boundary::loading::LoadState { jammed, ..state };
         if program.advance(world.step, world.time, &world.walls, &state) {
             write_row = true;
@@ -213,16 +319,52 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         if write_row || program.finished() || limit_reached {
             last_row = Measures::of(&world, phase_name, rate, mean_diameter);
             if phase_name == "isotropic" {
-                isotropic_curve.push((last_row.phi, last_row.p_c));
+                r.isotropic_curve.push((last_row.phi, last_row.p_c));
             }
             writer.write(&last_row).map_err(io_error(&macro_path))?;
+            r.macro_rows += 1;
             if let Some(log) = log.as_mut() {
                 let t = Instant::now();
                 log.write_frame(&world, &last_row).map_err(log_error)?;
                 mcap_seconds += t.elapsed().as_secs_f64();
             }
-            last_good.clone_from(&world.grains);
-            last_good_step = world.step;
+            r.last_good.clone_from(&world.grains);
+            r.last_good_step = world.step;
+        }
+        let ending = limit_reached || program.finished();
+        let stop_requested = options
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+            || options.stop_after_step == Some(world.step);
+        if !ending
+            && (stop_requested
+                || (options.checkpoint_every > 0 && world.step % options.checkpoint_every == 0))
+        {
+            write_checkpoint(snapshot(
+                scenario,
+                &world,
+                &program,
+                &r,
+                false,
+                options.checkpoint_every,
+            ))?;
+        }
+        if stop_requested && !ending {
+            progress.finish();
+            if let Some(log) = log.take() {
+                let outcome: BTreeMap<String, String> = [
+                    ("status".to_string(), "interrupted".to_string()),
+                    ("steps".to_string(), world.step.to_string()),
+                ]
+                .into_iter()
+                .collect();
+                log.finish(outcome).map_err(log_error)?;
+            }
+            return Err(RunError::Interrupted {
+                step: world.step,
+                checkpoint: checkpoint_path.display().to_string(),
+            });
         }
         progress.update(&program, &world, state.phi, p_c, started);
         if let Some(seconds) = options.progress_seconds
@@ -247,14 +389,24 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         }
     }
     progress.finish();
+    if options.checkpoint_every > 0 {
+        write_checkpoint(snapshot(
+            scenario,
+            &world,
+            &program,
+            &r,
+            true,
+            options.checkpoint_every,
+        ))?;
+    }
     let grains_path = out.join("grains.csv");
     write_grains_csv(&grains_path, &world).map_err(io_error(&grains_path))?;
-    let jamming = confirmed_jamming;
+    let jamming = r.confirmed_jamming;
     let eq69_rms_error = match jamming {
         Some(j) if scenario.material.is_incompressible() => {
             let reference = CantorReference::new(j.phi, j.z_nr);
-            let phi_high = isotropic_curve.iter().map(|p| p.0).fold(0.0, f64::max);
-            reference.rms_relative_error(&isotropic_curve, young, j.phi + 0.01, phi_high)
+            let phi_high = r.isotropic_curve.iter().map(|p| p.0).fold(0.0, f64::max);
+            reference.rms_relative_error(&r.isotropic_curve, young, j.phi + 0.01, phi_high)
         }
         _ => None,
     };
@@ -267,7 +419,7 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         wall_seconds: started.elapsed().as_secs_f64(),
         jamming,
         last: last_row,
-        max_loaded_inertial_number,
+        max_loaded_inertial_number: r.max_loaded_inertial_number,
         neighbor_builds: world.neighbors.builds,
         mcap_seconds,
     };

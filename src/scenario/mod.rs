@@ -112,7 +112,7 @@ pub enum TimeStep {
 
 impl Default for TimeStep {
     fn default() -> Self {
-        TimeStep::FractionOfCritical(0.2)
+        TimeStep::FractionOfCritical(0.4)
     }
 }
 

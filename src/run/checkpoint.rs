@@ -1,0 +1,555 @@
+//! Checkpoints of a run (`sdem run --checkpoint-every`, `sdem resume`): everything needed to
+//! continue a run and reproduce, bit for bit, the uninterrupted one.
+//!
+//! File layout (all integers little-endian):
+//!
+//! | bytes | what |
+//! | --- | --- |
+//! | 8 | magic `SDEMCKPT` |
+//! | 4 | format version (u32, [`FORMAT_VERSION`]) |
+//! | 8 | payload length in bytes (u64) |
+//! | 4 | CRC-32 (IEEE) of the payload (u32) |
+//! | n | payload: RON text of [`Checkpoint`] (UTF-8) |
+//!
+//! Every f64 of the state (grains, walls, time, totals, runner state) is stored as its IEEE bit
+//! pattern (u64), so the round trip is exact whatever the float printer does (-0.0, subnormals,
+//! NaN payloads). The scenario is stored as ordinary RON (it is what a user would have written).
+//!
+//! The neighbour list, the per-pair search hints and the per-step work arrays are not stored:
+//! the contact search is exact and the sums are taken in a fixed order, so results do not
+//! depend on them.
+
+use super::Jamming;
+use crate::boundary::loading::LoadingProgram;
+use crate::boundary::walls::Wall;
+use crate::grain::Grain;
+use crate::integration::{MAX_WALLS, StepTotals};
+use crate::scenario::Scenario;
+use glam::DVec2;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+pub const MAGIC: &[u8; 8] = b"SDEMCKPT";
+pub const FORMAT_VERSION: u32 = 1;
+const HEADER_LEN: usize = 8 + 4 + 8 + 4;
+/// The file name of the latest checkpoint in a run directory.
+pub const FILE_NAME: &str = "checkpoint.bin";
+
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("{path}: cannot read the checkpoint")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: not an sdem checkpoint (no SDEMCKPT magic)")]
+    NotACheckpoint { path: String },
+    #[error("{path}: checkpoint format version {found}, this sdem reads version {expected} only")]
+    Version {
+        path: String,
+        found: u32,
+        expected: u32,
+    },
+    #[error("{path}: truncated checkpoint ({found} bytes, expected {expected})")]
+    Truncated {
+        path: String,
+        found: u64,
+        expected: u64,
+    },
+    #[error("{path}: corrupt checkpoint ({reason})")]
+    Corrupt { path: String, reason: String },
+}
+
+/// An f64 stored as its bit pattern.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Bits(pub u64);
+
+impl From<f64> for Bits {
+    fn from(x: f64) -> Self {
+        Bits(x.to_bits())
+    }
+}
+
+impl From<Bits> for f64 {
+    fn from(b: Bits) -> Self {
+        f64::from_bits(b.0)
+    }
+}
+
+fn v2(v: DVec2) -> [Bits; 2] {
+    [v.x.into(), v.y.into()]
+}
+
+fn dv2(b: [Bits; 2]) -> DVec2 {
+    DVec2::new(b[0].into(), b[1].into())
+}
+
+/// A grain: radius, x, y, vx, vy, theta, omega, eps1, eps1_rate, eps2, eps2_rate, alpha,
+/// alpha_rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct GrainBits(pub [Bits; 13]);
+
+impl From<&Grain> for GrainBits {
+    fn from(g: &Grain) -> Self {
+        let b = |x: f64| Bits::from(x);
+        GrainBits([
+            b(g.radius),
+            b(g.center.x),
+            b(g.center.y),
+            b(g.velocity.x),
+            b(g.velocity.y),
+            b(g.theta),
+            b(g.omega),
+            b(g.eps1),
+            b(g.eps1_rate),
+            b(g.eps2),
+            b(g.eps2_rate),
+            b(g.alpha),
+            b(g.alpha_rate),
+        ])
+    }
+}
+
+impl From<&GrainBits> for Grain {
+    fn from(g: &GrainBits) -> Self {
+        let f = |k: usize| f64::from(g.0[k]);
+        Grain {
+            radius: f(0),
+            center: DVec2::new(f(1), f(2)),
+            velocity: DVec2::new(f(3), f(4)),
+            theta: f(5),
+            omega: f(6),
+            eps1: f(7),
+            eps1_rate: f(8),
+            eps2: f(9),
+            eps2_rate: f(10),
+            alpha: f(11),
+            alpha_rate: f(12),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WallBits {
+    pub point: [Bits; 2],
+    pub normal: [Bits; 2],
+    pub velocity: [Bits; 2],
+}
+
+impl From<&Wall> for WallBits {
+    fn from(w: &Wall) -> Self {
+        WallBits {
+            point: v2(w.point),
+            normal: v2(w.normal),
+            velocity: v2(w.velocity),
+        }
+    }
+}
+
+impl From<&WallBits> for Wall {
+    fn from(w: &WallBits) -> Self {
+        Wall {
+            point: dv2(w.point),
+            normal: dv2(w.normal),
+            velocity: dv2(w.velocity),
+        }
+    }
+}
+
+/// The totals of the last step: the loading program reads the wall forces and the grain area
+/// of the previous step before the next one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TotalsBits {
+    pub wall_force: Vec<Bits>,
+    pub grain_area: Bits,
+    pub kinetic_energy: Bits,
+    pub elastic_energy: Bits,
+    pub contacts: u64,
+    pub capped_contacts: u64,
+}
+
+impl From<&StepTotals> for TotalsBits {
+    fn from(t: &StepTotals) -> Self {
+        TotalsBits {
+            wall_force: t.wall_force.iter().map(|&f| f.into()).collect(),
+            grain_area: t.grain_area.into(),
+            kinetic_energy: t.kinetic_energy.into(),
+            elastic_energy: t.elastic_energy.into(),
+            contacts: t.contacts,
+            capped_contacts: t.capped_contacts,
+        }
+    }
+}
+
+impl TotalsBits {
+    fn to_totals(&self) -> Option<StepTotals> {
+        if self.wall_force.len() != MAX_WALLS {
+            return None;
+        }
+        let mut wall_force = [0.0; MAX_WALLS];
+        for (w, b) in wall_force.iter_mut().zip(&self.wall_force) {
+            *w = (*b).into();
+        }
+        Some(StepTotals {
+            wall_force,
+            grain_area: self.grain_area.into(),
+            kinetic_energy: self.kinetic_energy.into(),
+            elastic_energy: self.elastic_energy.into(),
+            contacts: self.contacts,
+            capped_contacts: self.capped_contacts,
+        })
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JammingBits {
+    pub step: u64,
+    pub phi: Bits,
+    pub z: Bits,
+    pub z_nr: Bits,
+    pub p_c: Bits,
+}
+
+impl From<&Jamming> for JammingBits {
+    fn from(j: &Jamming) -> Self {
+        JammingBits {
+            step: j.step,
+            phi: j.phi.into(),
+            z: j.z.into(),
+            z_nr: j.z_nr.into(),
+            p_c: j.p_c.into(),
+        }
+    }
+}
+
+impl From<&JammingBits> for Jamming {
+    fn from(j: &JammingBits) -> Self {
+        Jamming {
+            step: j.step,
+            phi: j.phi.into(),
+            z: j.z.into(),
+            z_nr: j.z_nr.into(),
+            p_c: j.p_c.into(),
+        }
+    }
+}
+
+/// The loading program with its floats as bits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProgramBits {
+    pub current: usize,
+    pub phase_start_step: u64,
+    pub phase_start_time: Bits,
+    pub phase_start_size: [Bits; 2],
+    pub rate: Bits,
+}
+
+/// Everything the run loop carries from one step to the next, besides the world.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RunnerState {
+    pub confirmed_jamming: Option<Jamming>,
+    pub candidate: Option<Jamming>,
+    pub max_loaded_inertial_number: f64,
+    /// (phi, p_c) of the isotropic rows, for the eq. 69 comparison.
+    pub isotropic_curve: Vec<(f64, f64)>,
+    pub last_good_step: u64,
+    /// Grains at `last_good_step` (reported after an instability).
+    pub last_good: Vec<Grain>,
+    /// Data rows of macro.csv written so far (header not counted).
+    pub macro_rows: u64,
+}
+
+/// A checkpoint as stored (see the module documentation).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stored {
+    /// The run's scenario: `resume` needs nothing else.
+    pub scenario: Scenario,
+    /// The run had ended when this was written (nothing left to resume).
+    pub complete: bool,
+    /// The run's `--checkpoint-every` (the default of `sdem resume`).
+    pub checkpoint_every: u64,
+    pub step: u64,
+    pub time: Bits,
+    pub grains: Vec<GrainBits>,
+    pub walls: Vec<WallBits>,
+    pub totals: TotalsBits,
+    pub program: ProgramBits,
+    pub confirmed_jamming: Option<JammingBits>,
+    pub candidate: Option<JammingBits>,
+    pub max_loaded_inertial_number: Bits,
+    pub isotropic_curve: Vec<[Bits; 2]>,
+    pub last_good_step: u64,
+    pub last_good: Vec<GrainBits>,
+    pub macro_rows: u64,
+}
+
+/// A checkpoint in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Checkpoint {
+    pub scenario: Scenario,
+    pub complete: bool,
+    pub checkpoint_every: u64,
+    pub step: u64,
+    pub time: f64,
+    pub grains: Vec<Grain>,
+    pub walls: Vec<Wall>,
+    pub totals: StepTotals,
+    pub program: LoadingProgram,
+    pub runner: RunnerState,
+}
+
+fn grains_bits(g: &[Grain]) -> Vec<GrainBits> {
+    g.iter().map(GrainBits::from).collect()
+}
+
+fn grains_of(g: &[GrainBits]) -> Vec<Grain> {
+    g.iter().map(Grain::from).collect()
+}
+
+impl Checkpoint {
+    fn to_stored(&self) -> Stored {
+        let p = &self.program;
+        let r = &self.runner;
+        Stored {
+            scenario: self.scenario.clone(),
+            complete: self.complete,
+            checkpoint_every: self.checkpoint_every,
+            step: self.step,
+            time: self.time.into(),
+            grains: grains_bits(&self.grains),
+            walls: self.walls.iter().map(WallBits::from).collect(),
+            totals: (&self.totals).into(),
+            program: ProgramBits {
+                current: p.current,
+                phase_start_step: p.phase_start_step,
+                phase_start_time: p.phase_start_time.into(),
+                phase_start_size: [p.phase_start_size.0.into(), p.phase_start_size.1.into()],
+                rate: p.rate.into(),
+            },
+            confirmed_jamming: r.confirmed_jamming.as_ref().map(JammingBits::from),
+            candidate: r.candidate.as_ref().map(JammingBits::from),
+            max_loaded_inertial_number: r.max_loaded_inertial_number.into(),
+            isotropic_curve: r
+                .isotropic_curve
+                .iter()
+                .map(|&(a, b)| [a.into(), b.into()])
+                .collect(),
+            last_good_step: r.last_good_step,
+            last_good: grains_bits(&r.last_good),
+            macro_rows: r.macro_rows,
+        }
+    }
+
+    fn from_stored(s: Stored) -> Result<Self, String> {
+        let totals = s
+            .totals
+            .to_totals()
+            .ok_or_else(|| format!("expected {MAX_WALLS} wall forces"))?;
+        if s.walls.len() > MAX_WALLS {
+            return Err(format!("{} walls (at most {MAX_WALLS})", s.walls.len()));
+        }
+        if s.grains.len() != s.scenario.sample.count {
+            return Err(format!(
+                "{} grains, the scenario has {}",
+                s.grains.len(),
+                s.scenario.sample.count
+            ));
+        }
+        if s.program.current > s.scenario.loading.len() {
+            return Err(format!(
+                "loading phase {} of {}",
+                s.program.current,
+                s.scenario.loading.len()
+            ));
+        }
+        s.scenario
+            .validate()
+            .map_err(|e| format!("invalid scenario: {e}"))?;
+        let program = LoadingProgram {
+            phases: s.scenario.loading.clone(),
+            current: s.program.current,
+            phase_start_step: s.program.phase_start_step,
+            phase_start_time: s.program.phase_start_time.into(),
+            phase_start_size: (
+                s.program.phase_start_size[0].into(),
+                s.program.phase_start_size[1].into(),
+            ),
+            rate: s.program.rate.into(),
+        };
+        let runner = RunnerState {
+            confirmed_jamming: s.confirmed_jamming.as_ref().map(Jamming::from),
+            candidate: s.candidate.as_ref().map(Jamming::from),
+            max_loaded_inertial_number: s.max_loaded_inertial_number.into(),
+            isotropic_curve: s
+                .isotropic_curve
+                .iter()
+                .map(|&[a, b]| (a.into(), b.into()))
+                .collect(),
+            last_good_step: s.last_good_step,
+            last_good: grains_of(&s.last_good),
+            macro_rows: s.macro_rows,
+        };
+        Ok(Checkpoint {
+            complete: s.complete,
+            checkpoint_every: s.checkpoint_every,
+            step: s.step,
+            time: s.time.into(),
+            grains: grains_of(&s.grains),
+            walls: s.walls.iter().map(Wall::from).collect(),
+            totals,
+            program,
+            runner,
+            scenario: s.scenario,
+        })
+    }
+
+    /// The file's bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let payload = ron::Options::default()
+            .to_string(&self.to_stored())
+            .expect("a checkpoint is always serializable");
+        let payload = payload.into_bytes();
+        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        out.extend_from_slice(&crc32(&payload).to_le_bytes());
+        out.extend_from_slice(&payload);
+        out
+    }
+
+    /// Decodes a file's bytes; `path` only names the file in errors. Never panics.
+    pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
+        let path = path.to_string();
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(CheckpointError::NotACheckpoint { path });
+        }
+        if bytes.len() < HEADER_LEN {
+            return Err(CheckpointError::Truncated {
+                path,
+                found: bytes.len() as u64,
+                expected: HEADER_LEN as u64,
+            });
+        }
+        let u32_at = |k: usize| u32::from_le_bytes(bytes[k..k + 4].try_into().unwrap_or([0; 4]));
+        let version = u32_at(8);
+        if version != FORMAT_VERSION {
+            return Err(CheckpointError::Version {
+                path,
+                found: version,
+                expected: FORMAT_VERSION,
+            });
+        }
+        let length = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or([0; 8]));
+        let crc = u32_at(20);
+        let expected = (HEADER_LEN as u64).saturating_add(length);
+        let found = bytes.len() as u64;
+        if found < expected {
+            return Err(CheckpointError::Truncated {
+                path,
+                found,
+                expected,
+            });
+        }
+        if found > expected {
+            return Err(CheckpointError::Corrupt {
+                path,
+                reason: format!("{} trailing bytes", found - expected),
+            });
+        }
+        let payload = &bytes[HEADER_LEN..];
+        if crc32(payload) != crc {
+            return Err(CheckpointError::Corrupt {
+                path,
+                reason: "checksum mismatch".into(),
+            });
+        }
+        Self::decode_payload(payload, &path)
+    }
+
+    /// Decodes a payload (after the header checks). Never panics.
+    pub fn decode_payload(payload: &[u8], path: &str) -> Result<Self, CheckpointError> {
+        let corrupt = |reason: String| CheckpointError::Corrupt {
+            path: path.to_string(),
+            reason,
+        };
+        let text = std::str::from_utf8(payload).map_err(|e| corrupt(format!("not UTF-8: {e}")))?;
+        let stored: Stored = ron::Options::default()
+            .from_str(text)
+            .map_err(|e| corrupt(format!("payload: {e}")))?;
+        Self::from_stored(stored).map_err(corrupt)
+    }
+
+    pub fn read(path: &Path) -> Result<Self, CheckpointError> {
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &name)
+    }
+
+    /// Writes atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the directory.
+    pub fn write_atomic(&self, path: &Path) -> std::io::Result<()> {
+        let tmp = tmp_path(path);
+        {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(&self.to_bytes())?;
+            f.sync_all()?;
+        }
+        std::fs::rename(&tmp, path)?;
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        // Directory fsync makes the rename durable; not every platform allows opening one.
+        if let Ok(d) = std::fs::File::open(&dir) {
+            d.sync_all().ok();
+        }
+        Ok(())
+    }
+}
+
+fn tmp_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".tmp");
+    PathBuf::from(name)
+}
+
+/// CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320).
+pub fn crc32(data: &[u8]) -> u32 {
+    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        let mut t = [0u32; 256];
+        for (i, e) in t.iter_mut().enumerate() {
+            let mut c = i as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+            *e = c;
+        }
+        t
+    });
+    let mut crc = !0u32;
+    for &b in data {
+        crc = table[((crc ^ b as u32) & 0xff) as usize] ^ (crc >> 8);
+    }
+    !crc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_check_value() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+}

@@ -1,0 +1,107 @@
+//! Where the explicit solver fails, and how the engine says so (SPEC §9).
+
+use glam::DVec2;
+use sdem::boundary::walls::box_walls;
+use sdem::grain::{Grain, Material, ModelLevel};
+use sdem::integration::parameters::critical_time_step;
+use sdem::integration::{Instability, Parameters, World};
+use sdem::run::bench::dense_packing;
+
+/// The dense bench packing (every grain overlapping its six neighbours) at `fraction` of the
+/// critical estimate, run for `steps` steps.
+fn dense_run(fraction: f64, steps: usize) -> Result<World, Instability> {
+    let mut world = dense_packing(400, 1.0);
+    let p = &world.params;
+    world.params.dt = fraction * critical_time_step(&p.material, &p.law, 0.5 * 0.024, p.level);
+    for _ in 0..steps {
+        world.step()?;
+    }
+    Ok(world)
+}
+
+#[test]
+fn a_step_just_below_the_critical_estimate_is_stable_on_a_dense_packing() {
+    // Expectation (SPEC §9): the estimate is the stability limit of the densest state; below
+    // it the dense packing relaxes without any diagnostic.
+    let world = dense_run(0.8, 3000).expect("stable below the critical estimate");
+    assert!(world.totals.contacts > 1000);
+    assert!(
+        world
+            .grains
+            .iter()
+            .all(|g| g.center.is_finite() && g.eps1.is_finite())
+    );
+}
+
+#[test]
+fn a_step_well_above_the_critical_estimate_is_stopped_with_a_diagnostic() {
+    // Expectation (SPEC §9): an unstable run is stopped by the engine's own checks (a runaway
+    // grain, a contact leaving the law's domain, an inverted or swallowed grain), before any
+    // NaN reaches the state.
+    for fraction in [2.0, 5.0] {
+        let err = dense_run(fraction, 3000).expect_err("unstable above the critical estimate");
+        assert!(
+            !matches!(err, Instability::NonFinite { .. }),
+            "caught only as NaN: {err}"
+        );
+        let message = err.to_string();
+        assert!(
+            message.contains("step") && message.contains("grain"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
+fn rigid_grains_conserve_energy_to_the_integrators_order() {
+    // Expectation: level 0 without damping is a conservative system (the secant-law force
+    // derives from the contact geometry alone); symplectic Euler keeps the energy to O(dt), so
+    // the kinetic energy after a burst of collisions, once no contact is active, differs from
+    // the initial one by an error that halves when dt halves.
+    let run = |fraction: f64| {
+        let material = Material {
+            young: 1.0,
+            poisson: 0.3,
+            density: 1.0,
+        };
+        let mut params = Parameters::new(material, 0.0);
+        params.level = ModelLevel::Rigid;
+        params.contact_damping = 0.0;
+        params.dt = fraction * critical_time_step(&material, &params.law, 0.01, params.level);
+        // A dilute gas: 5 x 5 grains in a box, random velocities.
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(5);
+        let mut next = || sdem::sample::unit_random(&mut rng) - 0.5;
+        let mut grains = Vec::new();
+        for i in 0..5 {
+            for j in 0..5 {
+                let mut g = Grain::at_rest(
+                    DVec2::new(0.1 + 0.2 * i as f64, 0.1 + 0.2 * j as f64),
+                    0.01 + 0.005 * next().abs(),
+                );
+                g.velocity = DVec2::new(next(), next()) * 0.02;
+                grains.push(g);
+            }
+        }
+        let mut world = World::new(params, grains, box_walls(0.0, 1.0, 0.0, 1.0));
+        let energy = |w: &World| w.grains.iter().map(|g| g.kinetic_energy(1.0)).sum::<f64>();
+        let initial = energy(&world);
+        let duration = 150.0;
+        let mut collisions = 0u64;
+        while world.time < duration
+            || world.totals.contacts > 0
+            || world.grain_stress.iter().any(|s| s.wall_contacts > 0)
+        {
+            world.step().unwrap();
+            collisions += world.totals.contacts;
+        }
+        assert!(collisions > 0);
+        (energy(&world) - initial).abs() / initial
+    };
+    let coarse = run(0.4);
+    let fine = run(0.2);
+    eprintln!(
+        "relative kinetic-energy error: {coarse:.3e} at 0.4 dt_crit, {fine:.3e} at 0.2 dt_crit"
+    );
+    assert!(coarse < 0.05, "energy error {coarse}");
+    assert!(fine < 0.7 * coarse, "no convergence: {coarse} -> {fine}");
+}
