@@ -2,7 +2,7 @@
 //! bitwise the uninterrupted one, whatever the step it stopped at, however it died, and with
 //! any thread count; damaged checkpoints are refused with a clear error.
 
-use rand::{Rng, SeedableRng};
+use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sdem::grain::Grain;
 use sdem::run::checkpoint::{Checkpoint, CheckpointError, FORMAT_VERSION, RunnerState};
