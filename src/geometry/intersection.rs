@@ -67,14 +67,11 @@ pub struct PairHint {
     pub second: ChainHint,
 }
 
-/// The nodes of one contour inside another polygon, `lo..=hi` (indices not yet wrapped), and
-/// the two points where the contour leaves that polygon: on edge (lo-1, lo) and on (hi, hi+1).
+/// The nodes of one contour inside another polygon, `lo..=hi` (indices not yet wrapped).
 #[derive(Debug, Clone, Copy)]
 struct Chain {
     lo: isize,
     hi: isize,
-    exit_lo: DVec2,
-    exit_hi: DVec2,
 }
 
 enum ChainSearch {
@@ -131,6 +128,21 @@ fn chain_inside(
         hi: table.wrap(hi) as i32,
     };
 
+    ChainSearch::Found(Chain { lo, hi })
+}
+
+/// The two points where `a`'s contour leaves `b`'s polygon at the ends of `a`'s chain inside
+/// it: on edge (lo-1, lo) and on edge (hi, hi+1). Both grains' chains end at the same two
+/// crossing points, so a contact computes them once, from one side.
+fn chain_exits(
+    table: &ContourTable,
+    a: &GrainShape,
+    b: &GrainShape,
+    chain: &Chain,
+) -> (DVec2, DVec2) {
+    let m = b.inv_map * a.map;
+    let t = b.inv_map * (a.center - b.center);
+    let node_in_b = |k: isize| m * table.vertex[table.wrap(k)] + t;
     // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
     let exit = |k_in: isize, k_out: isize| {
         let (p_in, p_out) = (node_in_b(k_in), node_in_b(k_out));
@@ -146,12 +158,7 @@ fn chain_inside(
         let v_out = table.vertex[table.wrap(k_out)];
         a.center + a.map * (v_in + (v_out - v_in) * t)
     };
-    ChainSearch::Found(Chain {
-        lo,
-        hi,
-        exit_lo: exit(lo, lo - 1),
-        exit_hi: exit(hi, hi + 1),
-    })
+    (exit(chain.lo, chain.lo - 1), exit(chain.hi, chain.hi + 1))
 }
 
 /// A node of `a` inside `b` near the deepest point of `a`'s smooth contour into `b`: where
@@ -365,8 +372,11 @@ pub fn grain_grain_hinted(
     // Crossing points in the order of grain i's contour (counter-clockwise): i's chain runs from
     // `p_lo` to `p_hi`; j's chain runs the other way.
     let (p_lo, p_hi) = match (&chain_i, &chain_j) {
-        (Some(c), _) => (c.exit_lo, c.exit_hi),
-        (None, Some(c)) => (c.exit_hi, c.exit_lo),
+        (Some(c), _) => chain_exits(table, i, j, c),
+        (None, Some(c)) => {
+            let (exit_lo, exit_hi) = chain_exits(table, j, i, c);
+            (exit_hi, exit_lo)
+        }
         (None, None) => return Overlap::Separate,
     };
     let chord = p_hi - p_lo;
