@@ -12,7 +12,9 @@
 //! Layout: [`geometry`] (contours, intersections, broad phase), [`contact`] (laws),
 //! [`grain`] (state, constitutive laws), [`integration`] (the time step), [`boundary`] (walls,
 //! loading programs), [`sample`] (initial packings), [`scenario`] (RON input), [`output`]
-//! (measures and files), [`run`] (a scenario from start to end).
+//! (measures, CSV files, MCAP logs, pictures and plots), [`run`] (a scenario from start to end,
+//! checkpoints, the bench), [`meshfree`] (the single-grain meshfree reference solver) and
+//! [`calibration`] (fitting the contact law to it).
 
 pub mod boundary;
 pub mod calibration;
