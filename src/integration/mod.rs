@@ -126,6 +126,9 @@ pub struct World {
     pub pair_contacts: Vec<PairContact>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
+    /// Per-step scratch for the broad phase (kept to avoid an allocation every step).
+    centers: Vec<DVec2>,
+    reach: Vec<f64>,
 }
 
 impl World {
@@ -147,6 +150,8 @@ impl World {
             pair_contacts: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
+            centers: Vec::with_capacity(n),
+            reach: Vec::with_capacity(n),
         }
     }
 
@@ -163,16 +168,17 @@ impl World {
                 mass: g.mass(density),
             })
             .collect_into_vec(&mut self.frames);
-        let centers: Vec<DVec2> = self.frames.iter().map(|f| f.shape.center).collect();
-        let reach: Vec<f64> = self
-            .frames
-            .iter()
-            .map(|f| f.shape.bounding_radius)
-            .collect();
-        if self.neighbors.needs_rebuild(&centers, &reach) {
+        self.centers.clear();
+        self.centers
+            .extend(self.frames.iter().map(|f| f.shape.center));
+        self.reach.clear();
+        self.reach
+            .extend(self.frames.iter().map(|f| f.shape.bounding_radius));
+        let (centers, reach) = (&self.centers, &self.reach);
+        if self.neighbors.needs_rebuild(centers, reach) {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
             let old_contacts = std::mem::take(&mut self.pair_contacts);
-            self.neighbors.build(&centers, &reach);
+            self.neighbors.build(centers, reach);
             // Pair indices change with the list: carry each surviving pair's search hint over
             // (both lists are sorted by (i, j)).
             self.pair_contacts = vec![PairContact::default(); self.neighbors.pairs.len()];
