@@ -21,6 +21,9 @@ pub struct ContourTable {
     pub dbeta: f64,
     /// `(cos beta_k, sin beta_k)` for each node k.
     pub vertex: Vec<DVec2>,
+    /// `vertex` three times over, so that `vertex_at(k)` needs no modulo for k in [-N, 2N),
+    /// the range every chain search stays in.
+    vertex_ring: Vec<DVec2>,
     /// Unit outward normal of edge k (from node k to node k+1), at angle `(k + 1/2) dbeta`.
     pub edge_normal: Vec<DVec2>,
     /// Distance from the centre to every edge of the unit polygon: `cos(dbeta / 2)`.
@@ -46,6 +49,12 @@ impl ContourTable {
                 let (s, c) = (k as f64 * dbeta).sin_cos();
                 DVec2::new(c, s)
             })
+            .collect::<Vec<DVec2>>();
+        let vertex_ring = vertex
+            .iter()
+            .chain(&vertex)
+            .chain(&vertex)
+            .copied()
             .collect();
         let edge_normal = (0..nodes)
             .map(|k| {
@@ -57,6 +66,7 @@ impl ContourTable {
             nodes,
             dbeta,
             vertex,
+            vertex_ring,
             edge_normal,
             apothem: (0.5 * dbeta).cos(),
             apothem_squared: (0.5 * dbeta).cos().powi(2),
@@ -77,6 +87,16 @@ impl ContourTable {
             (k - n) as usize
         } else {
             k.rem_euclid(n) as usize
+        }
+    }
+
+    /// Reference direction of node k (any signed k).
+    #[inline]
+    pub fn vertex_at(&self, k: isize) -> DVec2 {
+        // Below -N the shifted index wraps to a huge usize and misses the ring as well.
+        match self.vertex_ring.get((k + self.nodes as isize) as usize) {
+            Some(&v) => v,
+            None => self.vertex[self.wrap(k)],
         }
     }
 

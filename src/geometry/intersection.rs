@@ -9,8 +9,8 @@
 //! Sign conventions: the contact normal `n` points from grain i towards grain j (or towards the
 //! wall); gaps are negative when the contours interpenetrate.
 
-use super::contour::{ContourTable, GrainShape, fast_atan2};
-use glam::DVec2;
+use super::contour::{ContourTable, GrainShape};
+use glam::{DMat2, DVec2};
 
 /// What two shapes do to each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,7 +80,31 @@ enum ChainSearch {
     Whole,
 }
 
-/// Chain of `a`'s nodes strictly inside `b`'s polygon.
+/// The affine map from `a`'s reference coordinates to `b`'s: `u_b = m u_a + t`.
+#[derive(Debug, Clone, Copy)]
+struct RelativeMap {
+    m: DMat2,
+    t: DVec2,
+}
+
+impl RelativeMap {
+    #[inline]
+    fn new(a: &GrainShape, b: &GrainShape) -> Self {
+        Self {
+            m: b.inv_map * a.map,
+            t: b.inv_map * (a.center - b.center),
+        }
+    }
+
+    /// `a`'s node k in `b`'s reference coordinates.
+    #[inline]
+    fn node(&self, table: &ContourTable, k: isize) -> DVec2 {
+        self.m * table.vertex_at(k) + self.t
+    }
+}
+
+/// Chain of `a`'s nodes strictly inside `b`'s polygon (`a_in_b` maps a's reference
+/// coordinates into b's).
 ///
 /// The nodes of a convex contour inside another convex polygon form one run. Its ends are found
 /// by galloping from a seed node (offsets 1, 2, 4, ...) and bisecting: O(log) exact inside tests
@@ -91,20 +115,17 @@ fn chain_inside(
     table: &ContourTable,
     a: &GrainShape,
     b: &GrainShape,
+    a_in_b: &RelativeMap,
     hint: &mut ChainHint,
 ) -> ChainSearch {
-    // a's node k in b's reference coordinates: p_k = M v_k + t.
-    let m = b.inv_map * a.map;
-    let t = b.inv_map * (a.center - b.center);
-    let node_in_b = |k: isize| m * table.vertex[table.wrap(k)] + t;
-    let inside = |k: isize| table.contains(node_in_b(k));
+    let inside = |k: isize| table.contains(a_in_b.node(table, k));
 
     let n = table.nodes as isize;
     let half = n / 2;
     let ends = match hinted_ends(&inside, hint, n) {
         Some(ends) => ends,
         None => {
-            let Some(seed) = deepest_inside_node(table, a, b, &inside) else {
+            let Some(seed) = deepest_inside_node(table, a, b, a_in_b, &inside) else {
                 *hint = ChainHint::NONE;
                 return ChainSearch::Empty;
             };
@@ -131,34 +152,51 @@ fn chain_inside(
     ChainSearch::Found(Chain { lo, hi })
 }
 
-/// The two points where `a`'s contour leaves `b`'s polygon at the ends of `a`'s chain inside
-/// it: on edge (lo-1, lo) and on edge (hi, hi+1). Both grains' chains end at the same two
-/// crossing points, so a contact computes them once, from one side.
-fn chain_exits(
+/// Where `a`'s edge from node `k_in` (inside b) to its neighbour `k_out` (outside b) leaves
+/// `b`'s polygon, in global coordinates.
+///
+/// When the edge of b that it crosses is known (`b_edge`: b's chain end towards this crossing,
+/// found by b's own chain search), one line intersection gives it; the result is accepted only
+/// if it lands inside that edge's sector, which makes it exact even when rounding makes the two
+/// chain searches disagree about a node on the other's boundary. Otherwise (b has no node inside
+/// a, or that check failed) the exit edge is searched from the sector of the inside node.
+fn crossing(
     table: &ContourTable,
     a: &GrainShape,
-    b: &GrainShape,
-    chain: &Chain,
-) -> (DVec2, DVec2) {
-    let m = b.inv_map * a.map;
-    let t = b.inv_map * (a.center - b.center);
-    let node_in_b = |k: isize| m * table.vertex[table.wrap(k)] + t;
+    a_in_b: &RelativeMap,
+    k_in: isize,
+    k_out: isize,
+    b_edge: Option<usize>,
+) -> DVec2 {
+    let (p_in, p_out) = (a_in_b.node(table, k_in), a_in_b.node(table, k_out));
+    let direction = p_out - p_in;
+    let on_known_edge = b_edge.and_then(|s| {
+        let normal = table.edge_normal[s];
+        let rate = direction.dot(normal);
+        if rate <= 0.0 {
+            return None;
+        }
+        let t = (table.apothem - p_in.dot(normal)) / rate;
+        let q = p_in + direction * t;
+        let within = t > 0.0
+            && t <= 1.0
+            && table.vertex[s].perp_dot(q) >= 0.0
+            && table.vertex[table.next(s)].perp_dot(q) <= 0.0;
+        within.then_some(t)
+    });
     // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
-    let exit = |k_in: isize, k_out: isize| {
-        let (p_in, p_out) = (node_in_b(k_in), node_in_b(k_out));
-        // Neighbouring nodes: the outside node's sector is a step or two from the inside one's.
+    let t = on_known_edge.unwrap_or_else(|| {
         let sector_in = table.sector(p_in);
-        let t = table.exit_parameter(
+        // Neighbouring nodes: the outside node's sector is a step or two from the inside one's.
+        table.exit_parameter(
             p_in,
             sector_in,
             p_out,
             table.refine_sector(p_out, sector_in),
-        );
-        let v_in = table.vertex[table.wrap(k_in)];
-        let v_out = table.vertex[table.wrap(k_out)];
-        a.center + a.map * (v_in + (v_out - v_in) * t)
-    };
-    (exit(chain.lo, chain.lo - 1), exit(chain.hi, chain.hi + 1))
+        )
+    });
+    let (v_in, v_out) = (table.vertex_at(k_in), table.vertex_at(k_out));
+    a.center + a.map * (v_in + (v_out - v_in) * t)
 }
 
 /// A node of `a` inside `b` near the deepest point of `a`'s smooth contour into `b`: where
@@ -168,10 +206,10 @@ fn deepest_inside_node(
     table: &ContourTable,
     a: &GrainShape,
     b: &GrainShape,
+    a_in_b: &RelativeMap,
     inside: &impl Fn(isize) -> bool,
 ) -> Option<isize> {
-    let m = b.inv_map * a.map;
-    let t = b.inv_map * (a.center - b.center);
+    let RelativeMap { m, t } = *a_in_b;
     let toward_b = a.inv_map * (b.center - a.center);
     let mut beta = toward_b.y.atan2(toward_b.x);
     for _ in 0..2 {
@@ -310,8 +348,12 @@ fn walk(inside: &impl Fn(isize) -> bool, seed: isize, nodes: isize) -> Option<(i
 ///
 /// Both in O(1): consecutive nodes of the affine image of the regular N-gon span triangles of
 /// the same area `det(A R) sin(dbeta) / 2` about the centre, so the shoelace sum over the chain
-/// is that times (hi - lo); and `v_k . (A R)^T n` is largest at the node nearest the direction of
-/// `(A R)^T n`, or at the chain end nearest to it.
+/// is that times (hi - lo). The deepest node maximises `v_k . (A R)^T n`, i.e. it is the node
+/// nearest the direction of `(A R)^T n`; in reference coordinates that direction is
+/// perpendicular to the chord, whose ends lie on the edges (lo-1, lo) and (hi, hi+1), so it
+/// points within half a node (plus the sagitta's tilt of the chord, under 1/8 node once the
+/// chain has two nodes) of the middle angle `(lo + hi) / 2`: the deepest node is one of the two
+/// or three nodes around the middle of the chain.
 fn cap_area_and_depth(
     table: &ContourTable,
     shape: &GrainShape,
@@ -322,21 +364,25 @@ fn cap_area_and_depth(
     outward: DVec2,
 ) -> (f64, f64) {
     let (lo, hi) = chain;
-    let first = shape.node_offset(table, table.wrap(lo));
-    let last = shape.node_offset(table, table.wrap(hi));
+    let first = shape.map * table.vertex_at(lo);
+    let last = shape.map * table.vertex_at(hi);
     let (from, to) = (from - shape.center, to - shape.center);
     let fan = (hi - lo) as f64 * shape.map.determinant() * table.sin_dbeta;
     let twice_area = from.perp_dot(first) + fan + last.perp_dot(to) + to.perp_dot(from);
 
     let support = shape.map.transpose() * outward;
-    let n = table.nodes as isize;
-    let k_support = table.nearest_node(fast_atan2(support.y, support.x));
-    // The representative of k_support (mod N) nearest the middle of the chain, clamped into it.
-    let middle = (lo + hi) / 2;
-    let k = (k_support + n * (middle - k_support + n / 2).div_euclid(n)).clamp(lo, hi);
-    let mut reach = f64::NEG_INFINITY;
-    for kk in (k - 1).max(lo)..=(k + 1).min(hi) {
-        reach = reach.max(table.vertex[table.wrap(kk)].dot(support));
+    let sum = lo + hi;
+    let middle = sum >> 1; // floor((lo + hi) / 2), also for negative indices
+    let start = (middle - 1 + (sum & 1)).max(lo);
+    let end = (middle + 1).min(hi);
+    let mut reach = table.vertex_at(start).dot(support);
+    let mut k = start + 1;
+    while k <= end {
+        let r = table.vertex_at(k).dot(support);
+        if r > reach {
+            reach = r;
+        }
+        k += 1;
     }
     let depth = (shape.center - origin).dot(outward) + reach;
     (0.5 * twice_area, depth.max(0.0))
@@ -359,24 +405,44 @@ pub fn grain_grain_hinted(
         *hint = PairHint::default();
         return Overlap::Separate;
     }
-    let chain_i = match chain_inside(table, i, j, &mut hint.first) {
+    let i_in_j = RelativeMap::new(i, j);
+    let j_in_i = RelativeMap::new(j, i);
+    let chain_i = match chain_inside(table, i, j, &i_in_j, &mut hint.first) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
         ChainSearch::Found(c) => Some(c),
     };
-    let chain_j = match chain_inside(table, j, i, &mut hint.second) {
+    let chain_j = match chain_inside(table, j, i, &j_in_i, &mut hint.second) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
         ChainSearch::Found(c) => Some(c),
     };
     // Crossing points in the order of grain i's contour (counter-clockwise): i's chain runs from
-    // `p_lo` to `p_hi`; j's chain runs the other way.
+    // `p_lo` to `p_hi`; j's chain runs the other way, so p_lo lies on j's edge (hi, hi+1) and
+    // p_hi on j's edge (lo-1, lo).
     let (p_lo, p_hi) = match (&chain_i, &chain_j) {
-        (Some(c), _) => chain_exits(table, i, j, c),
-        (None, Some(c)) => {
-            let (exit_lo, exit_hi) = chain_exits(table, j, i, c);
-            (exit_hi, exit_lo)
-        }
+        (Some(ci), cj) => (
+            crossing(
+                table,
+                i,
+                &i_in_j,
+                ci.lo,
+                ci.lo - 1,
+                cj.map(|c| table.wrap(c.hi)),
+            ),
+            crossing(
+                table,
+                i,
+                &i_in_j,
+                ci.hi,
+                ci.hi + 1,
+                cj.map(|c| table.wrap(c.lo - 1)),
+            ),
+        ),
+        (None, Some(cj)) => (
+            crossing(table, j, &j_in_i, cj.hi, cj.hi + 1, None),
+            crossing(table, j, &j_in_i, cj.lo, cj.lo - 1, None),
+        ),
         (None, None) => return Overlap::Separate,
     };
     let chord = p_hi - p_lo;
@@ -678,6 +744,38 @@ mod tests {
         Some((area_i, area_j, depth_i, depth_j))
     }
 
+    /// Brute force crossing points: every edge of `a` whose ends lie on both sides of `b`,
+    /// intersected with `b`'s polygon edge by edge (the exit is the smallest parameter).
+    fn brute_crossings(
+        table: &ContourTable,
+        a: &GrainShape,
+        b: &GrainShape,
+        inside: &[bool],
+    ) -> Vec<DVec2> {
+        let n = table.nodes;
+        let mut points = Vec::new();
+        for k in 0..n {
+            let next = (k + 1) % n;
+            if inside[k] == inside[next] {
+                continue;
+            }
+            let (k_in, k_out) = if inside[k] { (k, next) } else { (next, k) };
+            let to_b = |x: DVec2| b.inv_map * (x - b.center);
+            let (p_in, p_out) = (to_b(a.node(table, k_in)), to_b(a.node(table, k_out)));
+            let d = p_out - p_in;
+            let t = (0..n)
+                .filter_map(|s| {
+                    let normal = table.edge_normal[s];
+                    let rate = d.dot(normal);
+                    (rate > 0.0).then(|| (table.apothem - p_in.dot(normal)) / rate)
+                })
+                .fold(1.0_f64, f64::min);
+            let (x_in, x_out) = (a.node(table, k_in), a.node(table, k_out));
+            points.push(x_in + (x_out - x_in) * t);
+        }
+        points
+    }
+
     #[test]
     fn fast_caps_match_a_node_by_node_computation() {
         // Expectation: the O(1) cap area and depth and the galloping chain search give what a
@@ -709,6 +807,34 @@ mod tests {
                 continue;
             };
             let (area_i, area_j, depth_i, depth_j) = brute_force(&table, &i, &j).unwrap();
+            // The crossing points, from whichever contour has nodes inside the other.
+            let inside_of = |a: &GrainShape, b: &GrainShape| -> Vec<bool> {
+                (0..table.nodes)
+                    .map(|k| {
+                        let u = b.inv_map * (a.node(&table, k) - b.center);
+                        table.gauge(u, table.sector(u)) < 1.0
+                    })
+                    .collect()
+            };
+            let in_i = inside_of(&i, &j);
+            let points = if in_i.iter().any(|&b| b) {
+                brute_crossings(&table, &i, &j, &in_i)
+            } else {
+                brute_crossings(&table, &j, &i, &inside_of(&j, &i))
+            };
+            assert_eq!(points.len(), 2);
+            let tangent = c.normal.perp();
+            let ends = [
+                c.point - tangent * (0.5 * c.length),
+                c.point + tangent * (0.5 * c.length),
+            ];
+            for p in points {
+                let miss = ends
+                    .iter()
+                    .map(|e| e.distance(p))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(miss < 1e-12 * (1.0 + rj), "crossing off by {miss}");
+            }
             let scale = c.length * c.length;
             assert!(
                 (c.cap_area_i - area_i).abs() < 1e-9 * scale,
