@@ -266,9 +266,22 @@ pub fn deformation_gradient(theta: f64, eps1: f64, eps2: f64, alpha: f64) -> DMa
     DMat2::from_angle(theta) * stretch
 }
 
+/// The rotation `Q` by the angle whose sine and cosine are given (what `DMat2::from_angle`
+/// builds, for callers that already hold the sine and cosine).
+#[inline]
+pub fn rotation(sin: f64, cos: f64) -> DMat2 {
+    DMat2::from_cols(DVec2::new(cos, sin), DVec2::new(-sin, cos))
+}
+
 /// The symmetric stretch `U = I + Q(alpha) diag(eps1, eps2) Q(alpha)^T`.
 pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
     let (s, c) = alpha.sin_cos();
+    stretch_from(eps1, eps2, s, c)
+}
+
+/// [`principal_stretch`] from the sine and cosine of alpha.
+#[inline]
+pub fn stretch_from(eps1: f64, eps2: f64, s: f64, c: f64) -> DMat2 {
     let u11 = 1.0 + eps1 * c * c + eps2 * s * s;
     let u22 = 1.0 + eps1 * s * s + eps2 * c * c;
     let u12 = (eps1 - eps2) * c * s;
@@ -277,7 +290,25 @@ pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
 
 impl GrainShape {
     pub fn new(center: DVec2, radius: f64, theta: f64, eps1: f64, eps2: f64, alpha: f64) -> Self {
-        let map = deformation_gradient(theta, eps1, eps2, alpha) * radius;
+        Self::from_deformation(
+            center,
+            radius,
+            deformation_gradient(theta, eps1, eps2, alpha),
+            eps1,
+            eps2,
+        )
+    }
+
+    /// The shape for a deformation gradient `A` already built from the grain's angles.
+    #[inline]
+    pub fn from_deformation(
+        center: DVec2,
+        radius: f64,
+        deformation: DMat2,
+        eps1: f64,
+        eps2: f64,
+    ) -> Self {
+        let map = deformation * radius;
         Self {
             center,
             map,

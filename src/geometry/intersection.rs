@@ -231,8 +231,8 @@ fn deepest_inside_node(
         .find(|&k| inside(k))
 }
 
-/// The chain's ends searched from last step's: exact when the hint's middle node is still
-/// inside (the run through it is the chain), None otherwise.
+/// The chain's ends searched from last step's: exact when the hint's ends, or its middle node,
+/// are still inside (the run through them is the chain), None otherwise.
 fn hinted_ends(
     inside: &impl Fn(isize) -> bool,
     hint: &ChainHint,
@@ -249,6 +249,17 @@ fn hinted_ends(
     let half = n / 2;
     if hi - lo >= half {
         return None;
+    }
+    if inside(lo) && inside(hi) {
+        // Both of last step's ends are still inside, so the chain runs through lo..=hi (or it
+        // covers more than half the contour, which the walk settles): extend it outwards.
+        let room = half - (hi - lo);
+        let forward = find_end(inside, hi, 1, room, None);
+        let backward = find_end(inside, lo, -1, room, None);
+        return Some(match (forward, backward) {
+            (Some(f), Some(b)) if hi + f - (lo - b) < half => Some((lo - b, hi + f)),
+            _ => walk(inside, lo, n),
+        });
     }
     let seed = (lo + hi) / 2;
     if !inside(seed) {
@@ -774,6 +785,71 @@ mod tests {
             points.push(x_in + (x_out - x_in) * t);
         }
         points
+    }
+
+    #[test]
+    fn hints_never_change_the_contact() {
+        // Expectation: a hint only chooses where the exact search starts, so any hint (last
+        // step's chains, shifted ones, random ones, swapped ones) gives the cold result bit for
+        // bit.
+        let table = ContourTable::new(1.0);
+        let n = table.nodes as i32;
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+        let mut next = || crate::sample::unit_random(&mut rng);
+        let mut compared = 0;
+        for _ in 0..300 {
+            let i = GrainShape::new(
+                DVec2::ZERO,
+                1.0,
+                6.0 * next(),
+                0.4 * next() - 0.2,
+                0.4 * next() - 0.2,
+                6.0 * next(),
+            );
+            let rj = 0.1 + 1.5 * next();
+            let j = GrainShape::new(
+                DVec2::from_angle(6.3 * next()) * (1.0 + rj) * (0.75 + 0.3 * next()),
+                rj,
+                6.0 * next(),
+                0.3 * next() - 0.15,
+                0.3 * next() - 0.15,
+                6.0 * next(),
+            );
+            let mut exact_hint = PairHint::default();
+            let cold = grain_grain_hinted(&table, &i, &j, &mut exact_hint);
+            let shift = |h: ChainHint, d: i32| ChainHint {
+                lo: (h.lo + d).rem_euclid(n),
+                hi: (h.hi - d).rem_euclid(n),
+            };
+            let mut hints = vec![exact_hint];
+            if exact_hint.first.lo >= 0 && exact_hint.second.lo >= 0 {
+                for d in [-3, -1, 1, 2, 5] {
+                    hints.push(PairHint {
+                        first: shift(exact_hint.first, d),
+                        second: shift(exact_hint.second, -d),
+                    });
+                }
+                hints.push(PairHint {
+                    first: exact_hint.second,
+                    second: exact_hint.first,
+                });
+            }
+            for _ in 0..4 {
+                let mut random = || ChainHint {
+                    lo: (next() * n as f64) as i32 % n,
+                    hi: (next() * n as f64) as i32 % n,
+                };
+                hints.push(PairHint {
+                    first: random(),
+                    second: random(),
+                });
+            }
+            for mut hint in hints {
+                assert_eq!(grain_grain_hinted(&table, &i, &j, &mut hint), cold);
+                compared += 1;
+            }
+        }
+        assert!(compared > 2000, "{compared}");
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! field of a grain together; the contact kernels read a separate compact array of
 //! [`GrainShape`](crate::geometry::GrainShape)s built once per step.
 
-use crate::geometry::contour::{GrainShape, principal_stretch};
+use crate::geometry::contour::{GrainShape, principal_stretch, rotation, stretch_from};
 use glam::{DMat2, DVec2};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -109,15 +109,40 @@ impl Grain {
     /// point at x moves at `velocity + L (x - center)`. With `A = Q(theta) U`,
     /// `L = omega J + Q(theta) (dU/dt) U^-1 Q(theta)^T`, J the rotation by 90 degrees.
     pub fn velocity_gradient(&self) -> DMat2 {
-        let (s, c) = self.alpha.sin_cos();
-        let q = DMat2::from_cols(DVec2::new(c, s), DVec2::new(-s, c));
+        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let stretch = principal_stretch(self.eps1, self.eps2, self.alpha);
+        self.velocity_gradient_from(
+            rotation(sin_alpha, cos_alpha),
+            DMat2::from_angle(self.theta),
+            stretch,
+        )
+    }
+
+    /// [`Grain::shape`] and [`Grain::velocity_gradient`] together: the sines and cosines of
+    /// theta and alpha are computed once (they were a tenth of the cost of a dense step).
+    pub fn shape_and_velocity_gradient(&self) -> (GrainShape, DMat2) {
+        let (sin_theta, cos_theta) = self.theta.sin_cos();
+        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let rot = rotation(sin_theta, cos_theta);
+        let stretch = stretch_from(self.eps1, self.eps2, sin_alpha, cos_alpha);
+        let shape = GrainShape::from_deformation(
+            self.center,
+            self.radius,
+            rot * stretch,
+            self.eps1,
+            self.eps2,
+        );
+        let gradient = self.velocity_gradient_from(rotation(sin_alpha, cos_alpha), rot, stretch);
+        (shape, gradient)
+    }
+
+    /// The velocity gradient from `Q(alpha)`, `Q(theta)` and `U`.
+    fn velocity_gradient_from(&self, q: DMat2, rot: DMat2, u: DMat2) -> DMat2 {
         let j = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::new(-1.0, 0.0));
         let d = DMat2::from_diagonal(DVec2::new(self.eps1, self.eps2));
         let d_rate = DMat2::from_diagonal(DVec2::new(self.eps1_rate, self.eps2_rate));
         // dU/dt = Q (alpha_rate (J D - D J) + dD/dt) Q^T
         let du = q * ((j * d - d * j) * self.alpha_rate + d_rate) * q.transpose();
-        let u = principal_stretch(self.eps1, self.eps2, self.alpha);
-        let rot = DMat2::from_angle(self.theta);
         j * self.omega + rot * du * u.inverse() * rot.transpose()
     }
 

@@ -161,11 +161,14 @@ impl World {
         self.grains
             .par_iter()
             .with_min_len(GRAIN_CHUNK)
-            .map(|g| Frame {
-                shape: g.shape(),
-                velocity: g.velocity,
-                velocity_gradient: g.velocity_gradient(),
-                mass: g.mass(density),
+            .map(|g| {
+                let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
+                Frame {
+                    shape,
+                    velocity: g.velocity,
+                    velocity_gradient,
+                    mass: g.mass(density),
+                }
             })
             .collect_into_vec(&mut self.frames);
         self.centers.clear();
