@@ -59,3 +59,87 @@ fn small_isotropic_compaction_jams_and_reports() {
     assert!(summary_text.contains("phi_0 = "));
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// A dilute sample compressed by 20% with and without `affine: true`.
+fn dilute_compression(affine: bool) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
+    let text = format!(
+        r#"
+Scenario(
+    name: "dilute",
+    sample: (count: 10, box_width: 1.0, box_height: 1.0,
+             radii: Gaussian(mean: 0.01, std_dev: 0.001, min: 0.008, max: 0.012)),
+    material: (young: 1.0, poisson: 0.5, density: 1.0),
+    loading: [ Isotropic(rate: Constant(0.05), until: Strain(0.2), affine: {affine}) ],
+    output: (every: 1000),
+)
+"#
+    );
+    let scenario = Scenario::parse(&text, "dilute.ron").unwrap();
+    let start = sdem::run::build_world(&scenario).unwrap();
+    let before: Vec<[f64; 2]> = start
+        .grains
+        .iter()
+        .map(|g| [g.center.x, g.center.y])
+        .collect();
+    // The expectation needs a gas that never collides: no two grains come within touching
+    // distance once the box has shrunk by 20%.
+    for (i, a) in start.grains.iter().enumerate() {
+        for b in &start.grains[..i] {
+            assert!(0.79 * a.center.distance(b.center) > a.radius + b.radius);
+        }
+    }
+    let out = std::env::temp_dir().join(format!("sdem-affine-{affine}-{}", std::process::id()));
+    run_scenario(
+        &scenario,
+        &RunOptions {
+            out_dir: out.clone(),
+            progress_seconds: None,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(out.join("grains.csv")).unwrap();
+    let after = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+            [f[1], f[2]]
+        })
+        .collect();
+    std::fs::remove_dir_all(&out).ok();
+    (before, after)
+}
+
+#[test]
+fn affine_compression_moves_grains_with_the_box() {
+    // Expectation: with no contacts, an affine compression is the homogeneous map of the box
+    // onto itself shrunk about its centre: each grain keeps its position relative to the box
+    // (x - 0.5) / W; without `affine` the grains stay where they are.
+    let (before, after) = dilute_compression(true);
+    let (_, still) = dilute_compression(false);
+    // The box side after the run, from the grain farthest from the centre (the CSV keeps 13
+    // digits, so the ratio is sharpest there).
+    let (b, a) = before
+        .iter()
+        .zip(&after)
+        .max_by(|x, y| (x.0[0] - 0.5).abs().total_cmp(&(y.0[0] - 0.5).abs()))
+        .unwrap();
+    let width = (a[0] - 0.5) / (b[0] - 0.5);
+    for (b, a) in before.iter().zip(&after) {
+        for axis in 0..2 {
+            let predicted = 0.5 + (b[axis] - 0.5) * width;
+            assert!((a[axis] - predicted).abs() < 1e-10, "{b:?} -> {a:?}");
+        }
+    }
+    assert!(width < 0.8 + 1e-3 && width > 0.79, "W = {width}");
+    // Without it, grains that the walls never reach (within 0.4 - 0.012 of the centre) stay put.
+    let mut untouched = 0;
+    for (b, s) in before.iter().zip(&still) {
+        if (b[0] - 0.5).abs().max((b[1] - 0.5).abs()) < 0.388 {
+            assert!((b[0] - s[0]).abs() < 1e-12 && (b[1] - s[1]).abs() < 1e-12);
+            untouched += 1;
+        }
+    }
+    assert!(untouched >= 3, "{untouched}");
+}

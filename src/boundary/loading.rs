@@ -49,9 +49,26 @@ pub enum StopWhen {
 #[serde(deny_unknown_fields)]
 pub enum Phase {
     /// All four walls move inward at the same strain rate.
-    Isotropic { rate: StrainRate, until: StopWhen },
+    Isotropic {
+        rate: StrainRate,
+        until: StopWhen,
+        /// Affine compression: every step, the grain centres follow the box's homogeneous
+        /// deformation (LAMMPS's `fix deform ... remap x`) instead of waiting for the walls to
+        /// push them. The compaction is then uniform through the sample, with no dense layer
+        /// building at the walls, whatever the box size; grain velocities stay the peculiar
+        /// velocities (the affine motion is not added), so kinetic energy and dashpots see only
+        /// the grains' own motion. Off by default.
+        #[serde(default)]
+        affine: bool,
+    },
     /// The right wall moves left; the others stay (paper §5.2).
-    Oedometric { rate: StrainRate, until: StopWhen },
+    Oedometric {
+        rate: StrainRate,
+        until: StopWhen,
+        /// As for `Isotropic`, along x only.
+        #[serde(default)]
+        affine: bool,
+    },
     /// Each axis is driven towards a target wall stress (compression positive): the box side
     /// changes at the relative rate `gain (s_c - target) / E`, capped at `max_rate`.
     /// Through the contact dashpot the wall stress responds at once to the wall's own velocity,
@@ -163,6 +180,14 @@ impl LoadingProgram {
         }
     }
 
+    /// Whether the current phase moves the grain centres with the box (see `Phase::Isotropic`).
+    pub fn affine(&self) -> bool {
+        matches!(
+            self.phases.get(self.current),
+            Some(Phase::Isotropic { affine: true, .. } | Phase::Oedometric { affine: true, .. })
+        )
+    }
+
     pub fn finished(&self) -> bool {
         self.current >= self.phases.len()
     }
@@ -261,6 +286,7 @@ mod tests {
             vec![Phase::Isotropic {
                 rate: StrainRate::Constant(0.1),
                 until: StopWhen::Steps(10),
+                affine: false,
             }],
             &walls,
         );

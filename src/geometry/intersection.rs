@@ -233,6 +233,7 @@ fn deepest_inside_node(
 
 /// The chain's ends searched from last step's: exact when the hint's ends, or its middle node,
 /// are still inside (the run through them is the chain), None otherwise.
+#[inline(always)]
 fn hinted_ends(
     inside: &impl Fn(isize) -> bool,
     hint: &ChainHint,
@@ -277,7 +278,7 @@ fn hinted_ends(
 /// that the seed is inside; None when the search reaches `limit` still inside. With a guess of
 /// d, gallops outwards from it (if inside) or inwards (if not), then bisects; without one,
 /// gallops from the seed.
-#[inline]
+#[inline(always)]
 fn find_end(
     inside: &impl Fn(isize) -> bool,
     seed: isize,
@@ -365,6 +366,7 @@ fn walk(inside: &impl Fn(isize) -> bool, seed: isize, nodes: isize) -> Option<(i
 /// points within half a node (plus the sagitta's tilt of the chord, under 1/8 node once the
 /// chain has two nodes) of the middle angle `(lo + hi) / 2`: the deepest node is one of the two
 /// or three nodes around the middle of the chain.
+#[inline(always)]
 fn cap_area_and_depth(
     table: &ContourTable,
     shape: &GrainShape,

@@ -401,6 +401,17 @@ impl World {
         Ok(&self.totals)
     }
 
+    /// Moves every grain centre with the homogeneous deformation that maps the box
+    /// `[from_lo, from_hi]` onto `[to_lo, to_hi]` (corners), each axis on its own: the affine
+    /// part of an affine compression. Velocities are left alone (they stay peculiar).
+    pub fn remap_affine(&mut self, from_lo: DVec2, from_hi: DVec2, to_lo: DVec2, to_hi: DVec2) {
+        let scale = (to_hi - to_lo) / (from_hi - from_lo);
+        self.grains
+            .par_iter_mut()
+            .with_min_len(GRAIN_CHUNK)
+            .for_each(|g| g.center = to_lo + (g.center - from_lo) * scale);
+    }
+
     /// Coordination numbers (z, z_nr) of the last step: `2C/N` over grain–grain contacts, and
     /// the same over the grains with at least 2 contacts and the contacts between them.
     pub fn coordination(&self) -> (f64, f64) {

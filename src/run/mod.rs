@@ -255,6 +255,7 @@ fn run_loop(
         program.drive(&mut world.walls, &state);
         let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
         let rate = program.rate;
+        let box_before = box_corners(&world.walls);
         if let Err(instability) = world.step() {
             progress.finish();
             let state_file = out.join("grains_last_good.csv");
@@ -277,6 +278,11 @@ fn run_loop(
                 last_good_step: r.last_good_step,
                 state_file: state_file.display().to_string(),
             });
+        }
+        if program.affine() {
+            let (lo, hi) = box_before;
+            let (to_lo, to_hi) = box_corners(&world.walls);
+            world.remap_affine(lo, hi, to_lo, to_hi);
         }
         let state = Measures::load_state(&world, r.confirmed_jamming.is_some(), mean_diameter);
         let p_c = state.mean_stress();
@@ -649,4 +655,13 @@ fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::R
         writeln!(f, "eq69_points = {n}")?;
     }
     Ok(())
+}
+
+/// Lower-left and upper-right corners of the box made by the four walls.
+fn box_corners(walls: &[crate::boundary::walls::Wall]) -> (glam::DVec2, glam::DVec2) {
+    use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+    (
+        glam::DVec2::new(walls[LEFT].point.x, walls[BOTTOM].point.y),
+        glam::DVec2::new(walls[RIGHT].point.x, walls[TOP].point.y),
+    )
 }

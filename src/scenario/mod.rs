@@ -335,7 +335,7 @@ impl Scenario {
         for (k, phase) in self.loading.iter().enumerate() {
             let field = format!("loading[{k}]");
             match phase {
-                Phase::Isotropic { rate, until } | Phase::Oedometric { rate, until } => {
+                Phase::Isotropic { rate, until, .. } | Phase::Oedometric { rate, until, .. } => {
                     validate_rate(&format!("{field}.rate"), rate, &mut warnings)?;
                     validate_until(&format!("{field}.until"), until)?;
                 }
