@@ -1,10 +1,11 @@
 //! Contact geometry of two contour polygons, or of a contour polygon and a wall (SPEC §5).
 //!
 //! Both contours are convex, so their boundaries cross at two points P and P'. The arc of grain
-//! i that lies inside grain j is one run of consecutive nodes ("chain"): we find one node of it
-//! near the deepest point of the smooth ellipse, then walk outwards until a node leaves j. Only
-//! those nodes (plus one on each side) are ever computed: the cost of a contact grows with the
-//! length of its overlap arc, not with the contour resolution.
+//! i that lies inside grain j is one run of consecutive nodes ("chain"). Its ends are found by
+//! galloping and bisection from last step's ends (or, cold, from a node near the deepest point
+//! of the smooth ellipse): O(log) exact inside tests, whatever the resolution. The two crossing
+//! points are cut on j's polygon from i's chain ends, and the j edges they lie on are j's chain
+//! ends, so j's chain needs no search of its own. Cap areas and depths are O(1).
 //!
 //! Sign conventions: the contact normal `n` points from grain i towards grain j (or towards the
 //! wall); gaps are negative when the contours interpenetrate.
@@ -152,51 +153,61 @@ fn chain_inside(
     ChainSearch::Found(Chain { lo, hi })
 }
 
-/// Where `a`'s edge from node `k_in` (inside b) to its neighbour `k_out` (outside b) leaves
-/// `b`'s polygon, in global coordinates.
+/// Where `a`'s edge from node `k_in` (inside b) to `k_out` (outside b) leaves `b`'s polygon
+/// (global coordinates), and the edge of b it leaves through.
 ///
-/// When the edge of b that it crosses is known (`b_edge`: b's chain end towards this crossing,
-/// found by b's own chain search), one line intersection gives it; the result is accepted only
-/// if it lands inside that edge's sector, which makes it exact even when rounding makes the two
-/// chain searches disagree about a node on the other's boundary. Otherwise (b has no node inside
-/// a, or that check failed) the exit edge is searched from the sector of the inside node.
-fn crossing(
+/// The exit edge is looked for from a guess (last step's, or the inside node's sector): the
+/// segment is cut with the guessed edge's line and the cut accepted only if it lies within that
+/// edge's sector, which makes it the exit point exactly (the segment crosses the convex
+/// boundary once). A cut outside the sector moves the guess one edge towards it; after a few
+/// misses the exit is searched edge by edge from the inside node's sector.
+fn crossing_and_edge(
     table: &ContourTable,
     a: &GrainShape,
     a_in_b: &RelativeMap,
     k_in: isize,
     k_out: isize,
-    b_edge: Option<usize>,
-) -> DVec2 {
+    guess: Option<usize>,
+) -> (DVec2, usize) {
     let (p_in, p_out) = (a_in_b.node(table, k_in), a_in_b.node(table, k_out));
     let direction = p_out - p_in;
-    let on_known_edge = b_edge.and_then(|s| {
+    let mut s = guess.unwrap_or_else(|| table.sector(p_in));
+    let mut found = None;
+    for _ in 0..4 {
         let normal = table.edge_normal[s];
         let rate = direction.dot(normal);
         if rate <= 0.0 {
-            return None;
+            break;
         }
         let t = (table.apothem - p_in.dot(normal)) / rate;
         let q = p_in + direction * t;
-        let within = t > 0.0
-            && t <= 1.0
-            && table.vertex[s].perp_dot(q) >= 0.0
-            && table.vertex[table.next(s)].perp_dot(q) <= 0.0;
-        within.then_some(t)
-    });
+        let after_start = table.vertex[s].perp_dot(q) >= 0.0;
+        let before_end = table.vertex[table.next(s)].perp_dot(q) <= 0.0;
+        if after_start && before_end {
+            if t > 0.0 && t <= 1.0 {
+                found = Some((t, s));
+            }
+            break;
+        }
+        s = if after_start {
+            table.next(s)
+        } else {
+            table.previous(s)
+        };
+    }
     // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
-    let t = on_known_edge.unwrap_or_else(|| {
+    let (t, edge) = found.unwrap_or_else(|| {
         let sector_in = table.sector(p_in);
-        // Neighbouring nodes: the outside node's sector is a step or two from the inside one's.
-        table.exit_parameter(
+        let t = table.exit_parameter(
             p_in,
             sector_in,
             p_out,
             table.refine_sector(p_out, sector_in),
-        )
+        );
+        (t, table.sector(p_in + direction * t))
     });
     let (v_in, v_out) = (table.vertex_at(k_in), table.vertex_at(k_out));
-    a.center + a.map * (v_in + (v_out - v_in) * t)
+    (a.center + a.map * (v_in + (v_out - v_in) * t), edge)
 }
 
 /// A node of `a` inside `b` near the deepest point of `a`'s smooth contour into `b`: where
@@ -419,44 +430,69 @@ pub fn grain_grain_hinted(
         return Overlap::Separate;
     }
     let i_in_j = RelativeMap::new(i, j);
-    let j_in_i = RelativeMap::new(j, i);
     let chain_i = match chain_inside(table, i, j, &i_in_j, &mut hint.first) {
-        ChainSearch::Whole => return Overlap::Swallowed,
-        ChainSearch::Empty => None,
-        ChainSearch::Found(c) => Some(c),
-    };
-    let chain_j = match chain_inside(table, j, i, &j_in_i, &mut hint.second) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
         ChainSearch::Found(c) => Some(c),
     };
     // Crossing points in the order of grain i's contour (counter-clockwise): i's chain runs from
     // `p_lo` to `p_hi`; j's chain runs the other way, so p_lo lies on j's edge (hi, hi+1) and
-    // p_hi on j's edge (lo-1, lo).
-    let (p_lo, p_hi) = match (&chain_i, &chain_j) {
-        (Some(ci), cj) => (
-            crossing(
+    // p_hi on j's edge (lo-1, lo). When i has nodes inside j, the two crossings are found on
+    // j's polygon from i's side, and the j edges they lie on give j's chain without a search.
+    let (p_lo, p_hi, chain_j) = match chain_i {
+        Some(ci) => {
+            let last = (hint.second.lo >= 0).then_some(hint.second);
+            let (p_lo, edge_lo) = crossing_and_edge(
                 table,
                 i,
                 &i_in_j,
                 ci.lo,
                 ci.lo - 1,
-                cj.map(|c| table.wrap(c.hi)),
-            ),
-            crossing(
+                last.map(|h| h.hi as usize),
+            );
+            let (p_hi, edge_hi) = crossing_and_edge(
                 table,
                 i,
                 &i_in_j,
                 ci.hi,
                 ci.hi + 1,
-                cj.map(|c| table.wrap(c.lo - 1)),
-            ),
-        ),
-        (None, Some(cj)) => (
-            crossing(table, j, &j_in_i, cj.hi, cj.hi + 1, None),
-            crossing(table, j, &j_in_i, cj.lo, cj.lo - 1, None),
-        ),
-        (None, None) => return Overlap::Separate,
+                last.map(|h| table.previous(h.lo as usize)),
+            );
+            let chain_j = if edge_lo == edge_hi {
+                // Both crossings on one edge of j: none of j's nodes is inside i (all of them
+                // would put j inside i, leaving no node of i inside j).
+                None
+            } else {
+                let lo = table.next(edge_hi) as isize;
+                let hi = edge_lo as isize;
+                Some(Chain {
+                    lo,
+                    hi: if hi < lo {
+                        hi + table.nodes as isize
+                    } else {
+                        hi
+                    },
+                })
+            };
+            hint.second = chain_j.map_or(ChainHint::NONE, |c| ChainHint {
+                lo: c.lo as i32,
+                hi: table.wrap(c.hi) as i32,
+            });
+            (p_lo, p_hi, chain_j)
+        }
+        None => {
+            let j_in_i = RelativeMap::new(j, i);
+            let cj = match chain_inside(table, j, i, &j_in_i, &mut hint.second) {
+                ChainSearch::Whole => return Overlap::Swallowed,
+                ChainSearch::Empty => return Overlap::Separate,
+                ChainSearch::Found(c) => c,
+            };
+            (
+                crossing_and_edge(table, j, &j_in_i, cj.hi, cj.hi + 1, None).0,
+                crossing_and_edge(table, j, &j_in_i, cj.lo, cj.lo - 1, None).0,
+                Some(cj),
+            )
+        }
     };
     let chord = p_hi - p_lo;
     let length = chord.length();
