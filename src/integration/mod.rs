@@ -318,6 +318,10 @@ impl World {
                         load.contacts += 1;
                     }
                     for (w, wall) in walls.iter().enumerate() {
+                        // Most grains are far from every wall: skip the call.
+                        if wall.height(frame.shape.center) >= frame.shape.bounding_radius {
+                            continue;
+                        }
                         match grain_wall(table, &frame.shape, wall.point, wall.normal) {
                             Overlap::Separate => {}
                             Overlap::Swallowed => {
