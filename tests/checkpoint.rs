@@ -157,6 +157,7 @@ fn f64_round_trips_bit_exactly() {
         scenario: scenario.clone(),
         complete: false,
         checkpoint_every: 7,
+        checkpoint_seconds: None,
         step: 12,
         time: -0.0,
         grains: grains.clone(),
@@ -509,11 +510,12 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
     let scenario = scenario();
     let world = build_world(&scenario).unwrap();
     let mut small = scenario.clone();
-    small.sample.count = 3;
+    small.sample.count = Some(3);
     let c = Checkpoint {
         scenario: small.clone(),
         complete: false,
         checkpoint_every: 10,
+        checkpoint_seconds: Some(0.25),
         step: 5,
         time: 0.25,
         grains: world.grains[..3].to_vec(),
