@@ -44,20 +44,8 @@ pub enum RunError {
     },
     /// A phase with a stress target can no longer progress: the box collapsed or the grains
     /// fill it (phi >= [`PHI_LIMIT`]) before the target was reached.
-    #[error(
-        "step {step}: {phase} cannot reach its target {target}: {reason}; the stress reached is \
-         {reached}. Lower the target or stop the phase on another condition\n  the last good \
-         state (step {last_good_step}) is in {state_file}"
-    )]
-    TargetUnreachable {
-        step: u64,
-        phase: String,
-        target: String,
-        reason: String,
-        reached: String,
-        last_good_step: u64,
-        state_file: String,
-    },
+    #[error(transparent)]
+    TargetUnreachable(Box<TargetUnreachable>),
     /// The scenario cannot be run as given (e.g. its sample file was never read).
     #[error("{0}")]
     Setup(String),
@@ -69,6 +57,23 @@ pub enum RunError {
     Resume(String),
     #[error("stopped at step {step}; continue with `sdem resume {checkpoint}`")]
     Interrupted { step: u64, checkpoint: String },
+}
+
+/// See [`RunError::TargetUnreachable`].
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "step {step}: {phase} cannot reach its target {target}: {reason}; the stress reached is \
+     {reached}. Lower the target or stop the phase on another condition\n  the last good \
+     state (step {last_good_step}) is in {state_file}"
+)]
+pub struct TargetUnreachable {
+    pub step: u64,
+    pub phase: String,
+    pub target: String,
+    pub reason: String,
+    pub reached: String,
+    pub last_good_step: u64,
+    pub state_file: String,
 }
 
 /// Where the sample jammed (SPEC §7): the first state with p_c above p_jam.
@@ -416,7 +421,7 @@ fn run_loop(
             let reached = stress_reached(&state);
             let detail = format!("{phase} cannot reach {target}: {reason}; reached {reached}");
             let state_file = fail(&world, &r, &mut log, "target unreachable", detail)?;
-            return Err(RunError::TargetUnreachable {
+            return Err(RunError::TargetUnreachable(Box::new(TargetUnreachable {
                 step: world.step,
                 phase,
                 target,
@@ -424,7 +429,7 @@ fn run_loop(
                 reached,
                 last_good_step: r.last_good_step,
                 state_file,
-            });
+            })));
         }
         let limit_reached =
             scenario.output.max_steps > 0 && world.step >= scenario.output.max_steps;
