@@ -394,7 +394,7 @@ mod tests {
 
     #[test]
     fn headerless_and_named_columns() {
-        let a = parse_grains("0.5,0.5,0.1\n\n# c\n0.2, 0.3, 0.05, 1.0\n", "a").unwrap();
+        let a = parse_grains("0.5,0.5,0.1,0\n\n# c\n0.2, 0.3, 0.05, 1.0\n", "a").unwrap();
         assert_eq!(a.lines, vec![1, 4]);
         assert_eq!(a.grains[1].theta, 1.0);
         let b = parse_grains("id,radius,y,x,eps2\n0,0.1,0.3,0.2,-0.1\n", "b").unwrap();
