@@ -7,7 +7,7 @@ use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
 use sdem::run::checkpoint::Checkpoint;
 use sdem::run::{RunOptions, resume_run, run_scenario};
-use sdem::scenario::Scenario;
+use sdem::scenario::{CheckpointInterval, Scenario};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
@@ -46,9 +46,14 @@ enum Command {
         #[arg(long, value_name = "K", requires = "mcap")]
         mcap_scene_every: Option<u64>,
         /// Keep the latest checkpoint in DIR/checkpoint.bin, written every STEPS steps, on
-        /// Ctrl-C / SIGTERM (then the run stops) and at the end (see `sdem resume`).
+        /// Ctrl-C / SIGTERM (then the run stops) and at the end (see `sdem resume`). Overrides
+        /// the scenario's output.checkpoint.
         #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(1..))]
         checkpoint_every: Option<u64>,
+        /// Like --checkpoint-every, but every S seconds of wall-clock time (after the first step
+        /// that ends S seconds after the last checkpoint). Results do not depend on it.
+        #[arg(long, value_name = "S", value_parser = parse_seconds, conflicts_with = "checkpoint_every", allow_negative_numbers = true)]
+        checkpoint_every_seconds: Option<f64>,
     },
     /// Continue a run from its checkpoint (written by `sdem run --checkpoint-every`):
     /// macro.csv goes on from the checkpoint's step without missing or repeated rows.
@@ -67,9 +72,12 @@ enum Command {
         /// Write the continued part of the trajectory as a new MCAP log.
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
-        /// Checkpoint interval (default: the interrupted run's).
+        /// Checkpoint interval in steps (default: the interrupted run's).
         #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(1..))]
         checkpoint_every: Option<u64>,
+        /// Checkpoint interval in wall-clock seconds (default: the interrupted run's).
+        #[arg(long, value_name = "S", value_parser = parse_seconds, conflicts_with = "checkpoint_every", allow_negative_numbers = true)]
+        checkpoint_every_seconds: Option<f64>,
     },
     /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree).
     Bench {
@@ -174,6 +182,32 @@ fn parse_region(text: &str) -> std::result::Result<Region, String> {
     }
 }
 
+/// A checkpoint interval in seconds: a finite number > 0.
+fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 => Ok(s),
+        Ok(s) => Err(format!(
+            "{s} seconds: the checkpoint interval must be a finite number of seconds > 0"
+        )),
+        Err(e) => Err(format!("`{text}`: {e} (expected a number of seconds > 0)")),
+    }
+}
+
+/// The checkpoint interval of a run: the command line's, else the scenario's; (steps, seconds).
+fn checkpoint_interval(
+    steps: Option<u64>,
+    seconds: Option<f64>,
+    default: Option<CheckpointInterval>,
+) -> (u64, Option<f64>) {
+    match (steps, seconds, default) {
+        (Some(n), _, _) => (n, None),
+        (None, Some(s), _) => (0, Some(s)),
+        (None, None, Some(CheckpointInterval::EverySteps(n))) => (n, None),
+        (None, None, Some(CheckpointInterval::EverySeconds(s))) => (0, Some(s)),
+        (None, None, None) => (0, None),
+    }
+}
+
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
@@ -214,14 +248,20 @@ fn run(cli: Cli) -> Result<()> {
             mcap,
             mcap_scene_every,
             checkpoint_every,
+            checkpoint_every_seconds,
         } => {
             let parsed = load(&scenario)?;
+            let (every, seconds) = checkpoint_interval(
+                checkpoint_every,
+                checkpoint_every_seconds,
+                parsed.output.checkpoint,
+            );
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
             let pool = thread_pool(threads)?;
             eprintln!(
                 "sdem: {} — {} grains, dt = {:.3e} ({:.2} x critical), {} threads, output in {}",
                 parsed.name,
-                parsed.sample.count,
+                parsed.sample.grain_count(),
                 parsed.time_step_value(),
                 parsed.time_step_value() / parsed.critical_time_step(),
                 pool.current_num_threads(),
@@ -237,8 +277,9 @@ fn run(cli: Cli) -> Result<()> {
                     path,
                     scene_every: mcap_scene_every,
                 }),
-                checkpoint_every: checkpoint_every.unwrap_or(0),
-                stop: checkpoint_every.map(|_| stop_signals::install()),
+                checkpoint_every: every,
+                checkpoint_seconds: seconds,
+                stop: (every > 0 || seconds.is_some()).then(stop_signals::install),
                 stop_after_step: None,
             };
             let summary = pool.install(|| run_scenario(&parsed, &options))?;
@@ -251,6 +292,7 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
             mcap,
             checkpoint_every,
+            checkpoint_every_seconds,
         } => {
             let saved = Checkpoint::read(&checkpoint)?;
             let out_dir = out.unwrap_or_else(|| match checkpoint.parent() {
@@ -267,7 +309,10 @@ fn run(cli: Cli) -> Result<()> {
                 out_dir.display()
             );
             let terminal = std::io::stderr().is_terminal();
-            let every = checkpoint_every.unwrap_or(saved.checkpoint_every);
+            let (every, seconds) = match (checkpoint_every, checkpoint_every_seconds) {
+                (None, None) => (saved.checkpoint_every, saved.checkpoint_seconds),
+                (steps, seconds) => checkpoint_interval(steps, seconds, None),
+            };
             let options = RunOptions {
                 out_dir: out_dir.clone(),
                 progress_seconds: (!quiet && !terminal).then_some(30.0),
@@ -277,7 +322,8 @@ fn run(cli: Cli) -> Result<()> {
                     scene_every: None,
                 }),
                 checkpoint_every: every,
-                stop: (every > 0).then(stop_signals::install),
+                checkpoint_seconds: seconds,
+                stop: (every > 0 || seconds.is_some()).then(stop_signals::install),
                 stop_after_step: None,
             };
             let summary = pool.install(|| resume_run(&saved, &checkpoint, &options))?;
@@ -338,6 +384,16 @@ fn run(cli: Cli) -> Result<()> {
         Command::Check { scenario } => {
             let parsed = load(&scenario)?;
             println!("{}: valid", scenario.display());
+            match &parsed.sample.loaded {
+                Some(l) => println!(
+                    "sample: {} grains from {} (radii {:.4e} to {:.4e})",
+                    l.grains.len(),
+                    l.path.display(),
+                    l.smallest_radius(),
+                    l.grains.iter().map(|g| g.radius).fold(0.0, f64::max)
+                ),
+                None => println!("sample: {} generated grains", parsed.sample.grain_count()),
+            }
             println!(
                 "critical time step estimate: {:.4e}",
                 parsed.critical_time_step()

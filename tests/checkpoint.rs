@@ -157,6 +157,7 @@ fn f64_round_trips_bit_exactly() {
         scenario: scenario.clone(),
         complete: false,
         checkpoint_every: 7,
+        checkpoint_seconds: None,
         step: 12,
         time: -0.0,
         grains: grains.clone(),
@@ -260,6 +261,17 @@ fn start_and_stop(
     delay: Duration,
     stop: impl FnOnce(&mut std::process::Child),
 ) -> bool {
+    start_and_stop_with(scenario, dir, &["--checkpoint-every", "300"], delay, stop)
+}
+
+/// [`start_and_stop`] with other checkpoint arguments.
+fn start_and_stop_with(
+    scenario: &Path,
+    dir: &Path,
+    checkpoint_args: &[&str],
+    delay: Duration,
+    stop: impl FnOnce(&mut std::process::Child),
+) -> bool {
     let mut child = sdem()
         .args([
             "run",
@@ -267,7 +279,8 @@ fn start_and_stop(
             "--out",
             dir.to_str().unwrap(),
         ])
-        .args(["--checkpoint-every", "300", "--threads", "2", "--quiet"])
+        .args(checkpoint_args)
+        .args(["--threads", "2", "--quiet"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -509,11 +522,12 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
     let scenario = scenario();
     let world = build_world(&scenario).unwrap();
     let mut small = scenario.clone();
-    small.sample.count = 3;
+    small.sample.count = Some(3);
     let c = Checkpoint {
         scenario: small.clone(),
         complete: false,
         checkpoint_every: 10,
+        checkpoint_seconds: Some(0.25),
         step: 5,
         time: 0.25,
         grains: world.grains[..3].to_vec(),
@@ -554,4 +568,102 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
     }
     eprintln!("fuzz: {tried} inputs tried ({decoded} mutated checkpoints still decoded)");
     assert_eq!(tried, 6000);
+}
+
+/// Wall-clock checkpoints land on whatever step the clock says: a run killed at a random moment
+/// resumes from such a checkpoint bitwise identical to an uninterrupted run without any.
+#[test]
+fn wall_clock_checkpoints_resume_bitwise() {
+    let scenario = scenario();
+    // Checkpoints every few milliseconds change nothing in the results.
+    let reference = temp_dir("wall-ref");
+    let quiet = run_scenario(&scenario, &options(&reference, 1_000_000_000)).unwrap();
+    let timed = temp_dir("wall-timed");
+    let mut opts = options(&timed, 0);
+    opts.checkpoint_seconds = Some(0.005);
+    let summary = run_scenario(&scenario, &opts).unwrap();
+    eprintln!(
+        "{} wall-clock checkpoints in {:.2} s",
+        summary.checkpoints_written, summary.wall_seconds
+    );
+    assert!(summary.checkpoints_written > 2, "{summary:?}");
+    assert_eq!(quiet.checkpoints_written, 1);
+    assert_same_run(&reference, &timed);
+    assert_eq!(final_state(&timed).checkpoint_seconds, Some(0.005));
+    // Killed at a random moment after a wall-clock checkpoint, resumed with its interval.
+    let base = temp_dir("wall-kill");
+    let file = write_scenario(&base);
+    let mut rng = ChaCha8Rng::seed_from_u64(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64,
+    );
+    let mut cut = 0;
+    for attempt in 0..3 {
+        let dir = base.join(format!("run{attempt}"));
+        let delay = Duration::from_millis(rng.random_range(0..200) >> attempt);
+        let interrupted = start_and_stop_with(
+            &file,
+            &dir,
+            &["--checkpoint-every-seconds", "0.01"],
+            delay,
+            |c| c.kill().unwrap(),
+        );
+        if interrupted {
+            cut += 1;
+            let saved = Checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
+            assert_eq!(
+                (saved.checkpoint_every, saved.checkpoint_seconds),
+                (0, Some(0.01))
+            );
+            run_cli(&[
+                "resume",
+                dir.join("checkpoint.bin").to_str().unwrap(),
+                "--quiet",
+            ]);
+        }
+        assert_same_run(&reference, &dir);
+    }
+    eprintln!("killed mid-run and resumed: {cut} of 3 runs");
+    assert!(cut > 0, "every run finished before it could be killed");
+    for d in [reference, timed, base] {
+        std::fs::remove_dir_all(&d).ok();
+    }
+}
+
+/// `output.checkpoint` in the scenario turns checkpoints on; the command line overrides it.
+#[test]
+fn scenario_checkpoint_interval_and_its_override() {
+    let base = temp_dir("scenario-interval");
+    let path = base.join("small.ron");
+    std::fs::write(
+        &path,
+        SMALL.replace(
+            "output: (every: 50)",
+            "output: (every: 50, checkpoint: EverySteps(400))",
+        ),
+    )
+    .unwrap();
+    let run = |dir: &str, extra: &[&str]| -> Checkpoint {
+        let out = base.join(dir);
+        let mut args = vec![
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        args.push("--quiet");
+        run_cli(&args);
+        final_state(&out)
+    };
+    let c = run("scenario", &[]);
+    assert_eq!((c.checkpoint_every, c.checkpoint_seconds), (400, None));
+    let c = run("steps", &["--checkpoint-every", "1000"]);
+    assert_eq!((c.checkpoint_every, c.checkpoint_seconds), (1000, None));
+    let c = run("seconds", &["--checkpoint-every-seconds", "600"]);
+    assert_eq!((c.checkpoint_every, c.checkpoint_seconds), (0, Some(600.0)));
+    assert_same_run(&base.join("scenario"), &base.join("seconds"));
+    std::fs::remove_dir_all(&base).ok();
 }

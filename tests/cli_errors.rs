@@ -938,3 +938,442 @@ fn bad_command_line_is_a_usage_error() {
         assert!(!stderr.contains("panicked"), "{args:?}\nstderr:\n{stderr}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Samples read from a file (`sample: (.., file: "g.csv")`): every problem names the file, the
+// line, the column or value, and what is allowed
+
+/// `BASE` with its sample read from `g.csv` (next to the scenario) instead of generated.
+fn file_variant() -> String {
+    variant("count: 50,\n", "").replacen(RADII, "file: \"g.csv\"", 1)
+}
+
+/// Writes `grains` as g.csv and `text` as the scenario, runs `sdem check`.
+fn check_with_grains(scratch: &Scratch, text: &str, grains: &str) -> Output {
+    scratch.write("g.csv", grains);
+    let path = scratch.write("scenario.ron", text);
+    sdem(&[Path::new("check"), &path])
+}
+
+fn sample_file_fails(scratch: &Scratch, text: &str, grains: &str, needles: &[&str]) -> String {
+    let what = format!("g.csv = {grains:?}");
+    let stderr = clean_failure(&what, &check_with_grains(scratch, text, grains));
+    assert_mentions(&what, &stderr, needles);
+    stderr
+}
+
+#[test]
+fn sample_file_is_read_relative_to_the_scenario() {
+    let scratch = Scratch::new("sample_file_ok");
+    // Headerless x,y,radius; a header with optional columns; sdem's own grains.csv columns.
+    for grains in [
+        "0.3,0.3,0.02\n0.6,0.6,0.01\n",
+        "# two grains\nx,y,radius,theta\n0.3,0.3,0.02,0.5\n\n0.6,0.6,0.01,0\n",
+        "id,x,y,radius,theta,eps1,eps2,alpha,stress_xx,stress_yy,stress_xy,mean_stress_c,contacts\n\
+         0,0.3,0.3,0.02,0,0.01,-0.01,0.3,0,0,0,0,0\n1,0.6,0.6,0.01,0,0,0,0,0,0,0,0,0\n",
+    ] {
+        let out = check_with_grains(&scratch, &file_variant(), grains);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{grains:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(stdout.contains("sample: 2 grains from"), "{stdout}");
+        // The smallest radius of the file sets the critical time step.
+        assert!(stdout.contains("1.0000e-2"), "{stdout}");
+    }
+    // Run from another working directory: the file is found next to the scenario.
+    let path = scratch.path("scenario.ron");
+    let out = scratch.path("out");
+    let run = sdem(&[
+        Path::new("run"),
+        &path,
+        Path::new("--out"),
+        &out,
+        Path::new("--quiet"),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(out.join("grains.csv").exists());
+}
+
+#[test]
+fn sample_file_missing_or_empty() {
+    let scratch = Scratch::new("sample_file_missing");
+    let path = scratch.write("scenario.ron", &file_variant());
+    let stderr = clean_failure("no g.csv", &sdem(&[Path::new("check"), &path]));
+    assert_mentions(
+        "no g.csv",
+        &stderr,
+        &["cannot read the sample file", "g.csv"],
+    );
+    sample_file_fails(
+        &scratch,
+        &file_variant(),
+        "x,y,radius\n# nothing\n",
+        &["g.csv", "no grains", "at least one grain"],
+    );
+}
+
+#[test]
+fn sample_file_bad_lines() {
+    let scratch = Scratch::new("sample_file_lines");
+    let text = file_variant();
+    for (grains, needles) in [
+        (
+            "x,y,radius\n0.5,0.5,0.01\n0.5,0.2,abc\n",
+            &["g.csv:3", "`radius`", "\"abc\"", "not a number"][..],
+        ),
+        (
+            "x,y\n0.5,0.5\n",
+            &["g.csv:1", "no `radius` column", "theta"],
+        ),
+        (
+            "x,y,radius,colour\n0.5,0.5,0.01,3\n",
+            &["g.csv:1", "unknown column `colour`", "eps1"],
+        ),
+        (
+            "x,y,radius\n0.5,0.5\n",
+            &["g.csv:2", "2 fields, expected 3"],
+        ),
+        ("0.5,0.5\n", &["g.csv:1", "2 fields", "x,y,radius"]),
+        ("x,y,x,radius\n", &["g.csv:1", "`x` appears twice"]),
+        (
+            "0.5,abc,0.01\n",
+            &["g.csv:1", "neither a header", "nor a grain"],
+        ),
+        (
+            "x,y,radius\n0.5,0.5,inf\n",
+            &["g.csv:2", "`radius` = inf", "finite"],
+        ),
+        ("0.5,NaN,0.01\n", &["g.csv:1", "`y` = NaN", "finite"]),
+        ("0.5,0.5,-0.01\n", &["g.csv:1", "`radius` = -0.01", "> 0"]),
+        ("0.5,0.5,0\n", &["g.csv:1", "`radius` = 0", "> 0"]),
+        (
+            "x,y,radius,eps2\n0.5,0.5,0.01,-1\n",
+            &["g.csv:2", "`eps2` = -1", "> -1"],
+        ),
+    ] {
+        sample_file_fails(&scratch, &text, grains, needles);
+    }
+}
+
+#[test]
+fn sample_file_grain_outside_the_box() {
+    let scratch = Scratch::new("sample_file_box");
+    let text = file_variant();
+    // Centre beyond the right wall; centre on the bottom wall.
+    sample_file_fails(
+        &scratch,
+        &text,
+        "x,y,radius\n0.5,0.5,0.01\n1.2,0.5,0.01\n",
+        &["g.csv:3", "(1.2, 0.5)", "outside the box [0, 1] x [0, 1]"],
+    );
+    sample_file_fails(
+        &scratch,
+        &text,
+        "0.5,0,0.01\n",
+        &["g.csv:1", "outside the box"],
+    );
+    // sample.origin moves the box: the same grain is now outside it.
+    let moved = text.replacen("box_width: 1.0,", "box_width: 1.0, origin: (0.6, 0.0),", 1);
+    sample_file_fails(
+        &scratch,
+        &moved,
+        "0.5,0.5,0.01\n",
+        &["g.csv:1", "outside the box [0.6, 1.6] x [0, 1]"],
+    );
+    // A contour that crosses a wall more than the contact law allows (a strict domain floor).
+    let strict = text.replacen("damping: 1.0)", "damping: 1.0, domain_floor: 0.5)", 1);
+    assert_ne!(strict, text);
+    sample_file_fails(
+        &scratch,
+        &strict,
+        "x,y,radius\n0.005,0.5,0.02\n",
+        &[
+            "g.csv:2",
+            "crosses the left wall x = 0",
+            "domain of the contact law",
+        ],
+    );
+    // With the default law the same shallow crossing is a contact a compacted state may have.
+    let out = check_with_grains(&scratch, &text, "x,y,radius\n0.005,0.5,0.02\n");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn sample_file_overlapping_grains() {
+    let scratch = Scratch::new("sample_file_overlap");
+    let text = file_variant();
+    // Two equal discs whose caps overlap by a quarter radius each: inside the law's domain with
+    // the default a = 0.58, b = 2 (a compacted packing has such overlaps) ...
+    let pair = "x,y,radius\n0.2,0.2,0.01\n0.5,0.5,0.02\n0.53,0.5,0.02\n";
+    let out = check_with_grains(&scratch, &text, pair);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // ... but outside it with b = 5: both lines named.
+    let stiff = text.replacen("b: 2.0", "b: 5.0", 1);
+    sample_file_fails(
+        &scratch,
+        &stiff,
+        pair,
+        &[
+            "g.csv:3 and line 4",
+            "overlap beyond the domain of the contact law",
+        ],
+    );
+    // A centre inside the other grain, a swallowed grain, a duplicated line.
+    for (grains, needles) in [
+        (
+            "0.5,0.5,0.02\n0.51,0.5,0.02\n",
+            &["g.csv:1 and line 2", "a centre lies inside the other grain"][..],
+        ),
+        (
+            "0.5,0.5,0.05\n0.7,0.7,0.01\n0.51,0.5,0.01\n",
+            &["g.csv:1 and line 3", "inside the other grain"],
+        ),
+        (
+            "0.5,0.5,0.02\n0.5,0.5,0.02\n",
+            &["g.csv:1 and line 2", "duplicated line"],
+        ),
+    ] {
+        sample_file_fails(&scratch, &text, grains, needles);
+    }
+}
+
+#[test]
+fn sample_file_and_generation_fields() {
+    let scratch = Scratch::new("sample_file_fields");
+    let grains = "0.3,0.3,0.02\n0.6,0.6,0.01\n";
+    // radii with a file; a count that differs from the file's.
+    let both = variant("count: 50,\n", "").replacen(RADII, &format!("{RADII}, file: \"g.csv\""), 1);
+    sample_file_fails(&scratch, &both, grains, &["sample.radii", "sample.file"]);
+    let count = variant(RADII, "file: \"g.csv\"");
+    sample_file_fails(
+        &scratch,
+        &count,
+        grains,
+        &["sample.count", "= 50", "(2)", "g.csv"],
+    );
+    // Neither a file nor count/radii.
+    let neither = variant("count: 50,\n", "").replacen(&format!("{RADII},\n"), "", 1);
+    check_fails(
+        &scratch,
+        "no count",
+        &neither,
+        &["sample.count", "sample.file"],
+    );
+    let no_radii = variant(&format!("{RADII},\n"), "");
+    check_fails(
+        &scratch,
+        "no radii",
+        &no_radii,
+        &["sample.radii", "sample.file"],
+    );
+    // The Some(..) spelling is accepted too.
+    let some = variant("count: 50,\n", "").replacen(RADII, "file: Some(\"g.csv\")", 1);
+    let out = check_with_grains(&scratch, &some, grains);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Checkpoint interval in the scenario
+
+#[test]
+fn checkpoint_interval_values() {
+    let scratch = Scratch::new("checkpoint_interval");
+    let with = |c: &str| {
+        variant(
+            "max_steps: 10)",
+            &format!("max_steps: 10, checkpoint: {c})"),
+        )
+    };
+    for ok in [
+        "EverySteps(5)",
+        "EverySeconds(600.0)",
+        "Some(EverySteps(1))",
+    ] {
+        let path = scratch.write("scenario.ron", &with(ok));
+        let out = sdem(&[Path::new("check"), &path]);
+        assert!(
+            out.status.success(),
+            "{ok}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    for (bad, needles) in [
+        (
+            "EverySteps(0)",
+            &["output.checkpoint", "EverySteps(0)", "n >= 1"][..],
+        ),
+        (
+            "EverySeconds(0.0)",
+            &["output.checkpoint.EverySeconds", "= 0", "> 0"],
+        ),
+        (
+            "EverySeconds(-5.0)",
+            &["output.checkpoint.EverySeconds", "= -5", "> 0"],
+        ),
+        (
+            "EverySeconds(inf)",
+            &["output.checkpoint.EverySeconds", "inf"],
+        ),
+        (
+            "EveryMinute(3)",
+            &["`EveryMinute`", "`EverySteps`", "`EverySeconds`"],
+        ),
+    ] {
+        check_fails(&scratch, bad, &with(bad), needles);
+    }
+}
+
+#[test]
+fn checkpoint_every_seconds_on_the_command_line() {
+    let scratch = Scratch::new("checkpoint_seconds_cli");
+    let path = scratch.write("scenario.ron", BASE);
+    for (value, needle) in [
+        ("0", "> 0"),
+        ("-1", "> 0"),
+        ("inf", "> 0"),
+        ("soon", "soon"),
+    ] {
+        let out = sdem(&[
+            Path::new("run"),
+            &path,
+            Path::new("--checkpoint-every-seconds"),
+            Path::new(value),
+            Path::new("--quiet"),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{value}: {stderr}");
+        assert!(
+            stderr.contains("--checkpoint-every-seconds") && stderr.contains(needle),
+            "{stderr}"
+        );
+    }
+    // Steps and seconds together: one or the other.
+    let out = sdem(&[
+        Path::new("run"),
+        &path,
+        Path::new("--checkpoint-every"),
+        Path::new("5"),
+        Path::new("--checkpoint-every-seconds"),
+        Path::new("5"),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stress targets the material cannot reach
+
+const SERVO: &str = "Servo(sxx: 0.01, syy: 0.01, gain: 0.5, max_rate: 1e-2, until: Steps(10)),";
+
+#[test]
+fn tensile_or_zero_stress_targets() {
+    let scratch = Scratch::new("stress_targets");
+    for (phase, needles) in [
+        (
+            SERVO.replace("sxx: 0.01", "sxx: -0.01"),
+            &[
+                "loading[0].sxx",
+                "= -0.01",
+                "compressive stress > 0",
+                "tension",
+            ][..],
+        ),
+        (
+            SERVO.replace("syy: 0.01", "syy: 0.0"),
+            &["loading[0].syy", "= 0", "compressive stress > 0"],
+        ),
+        (
+            LOADING_PHASE.replace("Steps(10)", "MeanStress(-1e-3)"),
+            &["loading[0].until[1]", "= -0.001", "compressive stress > 0"],
+        ),
+        (
+            LOADING_PHASE.replace("Steps(10)", "MeanStress(0.0)"),
+            &["loading[0].until[1]", "= 0", "tension"],
+        ),
+        // The servo holds p_c at 0.01: a phase that only ends at p_c = 0.02 never ends.
+        (
+            SERVO.replace("Steps(10)", "MeanStress(0.02)"),
+            &[
+                "loading[0].until",
+                "MeanStress(0.02)",
+                "(sxx + syy)/2 = 0.01",
+                "never end",
+            ],
+        ),
+    ] {
+        check_fails(&scratch, &phase, &variant(LOADING_PHASE, &phase), needles);
+    }
+    // With another way out, the same condition is fine.
+    let path = scratch.write(
+        "scenario.ron",
+        &variant(
+            LOADING_PHASE,
+            &SERVO.replace("Steps(10)", "Any([MeanStress(0.02), Steps(10)])"),
+        ),
+    );
+    let out = sdem(&[Path::new("check"), &path]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn stress_targets_out_of_reach_are_warned_about() {
+    let scratch = Scratch::new("stress_warnings");
+    let check_warns = |text: &str, needles: &[&str]| {
+        let path = scratch.write("scenario.ron", text);
+        let out = sdem(&[Path::new("check"), &path]);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        assert!(stderr.contains("warning: "), "{stderr}");
+        assert_mentions("warning", &stderr, needles);
+        stderr
+    };
+    // Of the order of E.
+    check_warns(
+        &variant(LOADING_PHASE, &SERVO.replace("sxx: 0.01", "sxx: 0.8")),
+        &["loading[0].sxx = 0.8", "0.80 x E"],
+    );
+    check_warns(
+        &variant(
+            LOADING_PHASE,
+            &LOADING_PHASE.replace("Steps(10)", "MeanStress(2.0)"),
+        ),
+        &["loading[0].until[1] = 2", "2.00 x E"],
+    );
+    // Beyond what the contact law carries before leaving its domain: with b = 2 and the
+    // default floor, E (1 - 0.05) / 0.05 = 19 E.
+    check_warns(
+        &variant(LOADING_PHASE, &SERVO.replace("syy: 0.01", "syy: 25.0")),
+        &["loading[0].syy = 25", "contact law", "= 19", "domain"],
+    );
+    // A modest target: no warning.
+    let path = scratch.write("scenario.ron", &variant(LOADING_PHASE, SERVO));
+    let out = sdem(&[Path::new("check"), &path]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && !stderr.contains("warning"),
+        "{stderr}"
+    );
+}

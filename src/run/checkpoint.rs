@@ -24,7 +24,7 @@ use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
 use crate::grain::Grain;
 use crate::integration::{MAX_WALLS, StepTotals};
-use crate::scenario::Scenario;
+use crate::scenario::{LoadedSample, Scenario};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -271,6 +271,10 @@ pub struct Stored {
     pub complete: bool,
     /// The run's `--checkpoint-every` (the default of `sdem resume`).
     pub checkpoint_every: u64,
+    /// The run's wall-clock checkpoint interval in seconds, if any (absent in checkpoints
+    /// written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub checkpoint_seconds: Option<f64>,
     pub step: u64,
     pub time: Bits,
     pub grains: Vec<GrainBits>,
@@ -292,6 +296,7 @@ pub struct Checkpoint {
     pub scenario: Scenario,
     pub complete: bool,
     pub checkpoint_every: u64,
+    pub checkpoint_seconds: Option<f64>,
     pub step: u64,
     pub time: f64,
     pub grains: Vec<Grain>,
@@ -317,6 +322,7 @@ impl Checkpoint {
             scenario: self.scenario.clone(),
             complete: self.complete,
             checkpoint_every: self.checkpoint_every,
+            checkpoint_seconds: self.checkpoint_seconds,
             step: self.step,
             time: self.time.into(),
             grains: grains_bits(&self.grains),
@@ -343,7 +349,7 @@ impl Checkpoint {
         }
     }
 
-    fn from_stored(s: Stored) -> Result<Self, String> {
+    fn from_stored(mut s: Stored) -> Result<Self, String> {
         let totals = s
             .totals
             .to_totals()
@@ -351,12 +357,27 @@ impl Checkpoint {
         if s.walls.len() > MAX_WALLS {
             return Err(format!("{} walls (at most {MAX_WALLS})", s.walls.len()));
         }
-        if s.grains.len() != s.scenario.sample.count {
+        if let Some(count) = s.scenario.sample.count
+            && s.grains.len() != count
+        {
             return Err(format!(
-                "{} grains, the scenario has {}",
+                "{} grains, the scenario has {count}",
                 s.grains.len(),
-                s.scenario.sample.count
             ));
+        }
+        if let Some(file) = &s.scenario.sample.file {
+            // The run goes on from the stored grains: the file is not read again, and only the
+            // grains' radii (constant during a run) matter to the scenario, through the
+            // critical time step.
+            s.scenario.sample.loaded = Some(std::sync::Arc::new(LoadedSample {
+                path: file.clone(),
+                grains: grains_of(&s.grains),
+            }));
+        }
+        if let Some(seconds) = s.checkpoint_seconds
+            && !(seconds.is_finite() && seconds > 0.0)
+        {
+            return Err(format!("checkpoint interval of {seconds} s"));
         }
         if s.program.current > s.scenario.loading.len() {
             return Err(format!(
@@ -395,6 +416,7 @@ impl Checkpoint {
         Ok(Checkpoint {
             complete: s.complete,
             checkpoint_every: s.checkpoint_every,
+            checkpoint_seconds: s.checkpoint_seconds,
             step: s.step,
             time: s.time.into(),
             grains: grains_of(&s.grains),
@@ -477,7 +499,7 @@ impl Checkpoint {
             reason,
         };
         let text = std::str::from_utf8(payload).map_err(|e| corrupt(format!("not UTF-8: {e}")))?;
-        let stored: Stored = ron::Options::default()
+        let stored: Stored = crate::scenario::ron_options()
             .from_str(text)
             .map_err(|e| corrupt(format!("payload: {e}")))?;
         Self::from_stored(stored).map_err(corrupt)

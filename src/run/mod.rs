@@ -4,8 +4,8 @@
 pub mod bench;
 pub mod checkpoint;
 
-use crate::boundary::loading::{LoadingProgram, StopWhen};
-use crate::boundary::walls::box_walls;
+use crate::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
+use crate::boundary::walls::{box_size, box_walls};
 use crate::grain::Grain;
 use crate::integration::{Instability, World};
 use crate::output::mcap::{McapSettings, TrajectoryWriter};
@@ -31,12 +31,24 @@ pub enum RunError {
         path: String,
         source: std::io::Error,
     },
-    #[error("{instability}\n  the last good state (step {last_good_step}) is in {state_file}")]
+    /// An instability; `note` (empty, or a line starting with a newline) says which stress
+    /// target the phase was heading for and the stress reached.
+    #[error(
+        "{instability}{note}\n  the last good state (step {last_good_step}) is in {state_file}"
+    )]
     Unstable {
         instability: Instability,
+        note: String,
         last_good_step: u64,
         state_file: String,
     },
+    /// A phase with a stress target can no longer progress: the box collapsed or the grains
+    /// fill it (phi >= [`PHI_LIMIT`]) before the target was reached.
+    #[error(transparent)]
+    TargetUnreachable(Box<TargetUnreachable>),
+    /// The scenario cannot be run as given (e.g. its sample file was never read).
+    #[error("{0}")]
+    Setup(String),
     #[error("could not start {threads} threads: {message}")]
     Threads { threads: usize, message: String },
     #[error(transparent)]
@@ -45,6 +57,23 @@ pub enum RunError {
     Resume(String),
     #[error("stopped at step {step}; continue with `sdem resume {checkpoint}`")]
     Interrupted { step: u64, checkpoint: String },
+}
+
+/// See [`RunError::TargetUnreachable`].
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "step {step}: {phase} cannot reach its target {target}: {reason}; the stress reached is \
+     {reached}. Lower the target or stop the phase on another condition\n  the last good \
+     state (step {last_good_step}) is in {state_file}"
+)]
+pub struct TargetUnreachable {
+    pub step: u64,
+    pub phase: String,
+    pub target: String,
+    pub reason: String,
+    pub reached: String,
+    pub last_good_step: u64,
+    pub state_file: String,
 }
 
 /// Where the sample jammed (SPEC §7): the first state with p_c above p_jam.
@@ -74,7 +103,16 @@ pub struct RunSummary {
     pub eq69_rms_error: Option<(f64, usize)>,
     /// Wall-clock seconds spent writing the MCAP log (0 without one).
     pub mcap_seconds: f64,
+    /// Checkpoints written by this process (the final one included).
+    pub checkpoints_written: u64,
+    /// The box at the end, `[x0, x1, y0, y1]`.
+    pub final_box: [f64; 4],
 }
+
+/// A phase with a stress target stops with [`RunError::TargetUnreachable`] once the packing
+/// fraction reaches this: the grains fill the box and the stress cannot be raised further
+/// without the contact law leaving its domain or grains inverting.
+pub const PHI_LIMIT: f64 = 0.999;
 
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -89,6 +127,10 @@ pub struct RunOptions {
     /// Keep the latest checkpoint in `out_dir/checkpoint.bin`, written every this many steps
     /// and at the end of the run (0: none). See [`checkpoint`].
     pub checkpoint_every: u64,
+    /// Also (or instead) write the checkpoint after the first step that ends this many
+    /// wall-clock seconds after the previous checkpoint or the start. Results do not depend on
+    /// it.
+    pub checkpoint_seconds: Option<f64>,
     /// Set (e.g. by a signal handler) to stop the run cleanly: a checkpoint is written after
     /// the current step and the run ends with [`RunError::Interrupted`].
     pub stop: Option<&'static AtomicBool>,
@@ -103,19 +145,34 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
     }
 }
 
-/// Builds the world of a scenario: its generated sample at rest in its box.
+/// Builds the world of a scenario: its sample (generated, or read from its file by
+/// [`Scenario::load`]) at rest in its box.
 pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
-    let placed = sample::generate(&scenario.sample, scenario.seed)?;
-    let grains = placed
-        .iter()
-        .map(|p| Grain::at_rest(DVec2::new(p.x, p.y), p.radius))
-        .collect();
-    let walls = box_walls(
-        0.0,
-        scenario.sample.box_width,
-        0.0,
-        scenario.sample.box_height,
-    );
+    let s = &scenario.sample;
+    let (x0, y0) = s.origin;
+    let grains = match (&s.loaded, s.spec()) {
+        (Some(loaded), _) => loaded.grains.clone(),
+        (None, Some(spec)) => sample::generate(&spec, scenario.seed)?
+            .iter()
+            .map(|p| {
+                let center = if (x0, y0) == (0.0, 0.0) {
+                    DVec2::new(p.x, p.y)
+                } else {
+                    DVec2::new(x0 + p.x, y0 + p.y)
+                };
+                Grain::at_rest(center, p.radius)
+            })
+            .collect(),
+        (None, None) => {
+            return Err(RunError::Setup(format!(
+                "scenario {}: sample.file {:?} has not been read (Scenario::load reads it)",
+                scenario.name,
+                s.file.as_deref().unwrap_or(Path::new("")).display()
+            )));
+        }
+    };
+    let b = s.bounds();
+    let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
     Ok(World::new(scenario.parameters(), grains, walls))
 }
 
@@ -192,12 +249,13 @@ fn snapshot(
     program: &LoadingProgram,
     runner: &RunnerState,
     complete: bool,
-    checkpoint_every: u64,
+    options: &RunOptions,
 ) -> Checkpoint {
     Checkpoint {
         scenario: scenario.clone(),
         complete,
-        checkpoint_every,
+        checkpoint_every: options.checkpoint_every,
+        checkpoint_seconds: options.checkpoint_seconds,
         step: world.step,
         time: world.time,
         grains: world.grains.clone(),
@@ -234,10 +292,14 @@ fn run_loop(
         io_error(&path)(e.into())
     };
     let checkpoint_path = out.join(checkpoint::FILE_NAME);
-    let write_checkpoint = |c: Checkpoint| {
+    let mut checkpoints_written = 0u64;
+    let mut write_checkpoint = |c: Checkpoint| {
+        checkpoints_written += 1;
         c.write_atomic(&checkpoint_path)
             .map_err(io_error(&checkpoint_path))
     };
+    let checkpoints_on = options.checkpoint_every > 0 || options.checkpoint_seconds.is_some();
+    let mut last_checkpoint = Instant::now();
     let mut mcap_seconds = 0.0;
     let mut progress = Progress::new(options.progress_bar, &program_phases(scenario));
     let started = Instant::now();
@@ -249,23 +311,34 @@ fn run_loop(
     let every = scenario.output.every;
     let mut last_progress = Instant::now();
     let mut last_row = Measures::of(&world, "start", 0.0, mean_diameter);
+    // Incompressible grains keep their area pi R^2: their total is the area they need.
+    let conserved_area = scenario
+        .material
+        .is_incompressible()
+        .then(|| world.grains.iter().map(Grain::reference_area).sum::<f64>());
 
     while !program.finished() {
         let state = Measures::load_state(&world, r.confirmed_jamming.is_some(), mean_diameter);
         program.drive(&mut world.walls, &state);
         let phase_name = program.phase().map(|p| p.name()).unwrap_or("end");
         let rate = program.rate;
-        let box_before = box_corners(&world.walls);
-        if let Err(instability) = world.step() {
+        // Ends the run on a failure: the last good state to grains_last_good.csv, the MCAP log
+        // finished with `status`; returns the state file's name.
+        let mut fail = |world: &World,
+                        r: &RunnerState,
+                        log: &mut Option<TrajectoryWriter>,
+                        status: &str,
+                        detail: String|
+         -> Result<String, RunError> {
             progress.finish();
             let state_file = out.join("grains_last_good.csv");
             let mut snapshot = world.clone();
-            snapshot.grains = r.last_good;
+            snapshot.grains.clone_from(&r.last_good);
             write_grains_csv(&state_file, &snapshot).map_err(io_error(&state_file))?;
             if let Some(log) = log.take() {
                 let outcome: BTreeMap<String, String> = [
-                    ("status", "unstable".to_string()),
-                    ("instability", instability.to_string()),
+                    ("status", status.to_string()),
+                    ("instability", detail),
                     ("last_good_step", r.last_good_step.to_string()),
                 ]
                 .into_iter()
@@ -273,10 +346,36 @@ fn run_loop(
                 .collect();
                 log.finish(outcome).map_err(log_error)?;
             }
+            Ok(state_file.display().to_string())
+        };
+        let box_before = box_corners(&world.walls);
+        if let Err(instability) = world.step() {
+            let note = match program.phase().and_then(stress_target) {
+                Some(target) => format!(
+                    "\n  loading[{}] ({}) was heading for its target {target}; the stress reached \
+                     is {}",
+                    program.current,
+                    phase_name,
+                    stress_reached(&Measures::load_state(
+                        &world,
+                        r.confirmed_jamming.is_some(),
+                        mean_diameter
+                    ))
+                ),
+                None => String::new(),
+            };
+            let state_file = fail(
+                &world,
+                &r,
+                &mut log,
+                "unstable",
+                format!("{instability}{note}"),
+            )?;
             return Err(RunError::Unstable {
                 instability,
+                note,
                 last_good_step: r.last_good_step,
-                state_file: state_file.display().to_string(),
+                state_file,
             });
         }
         if program.affine() {
@@ -320,6 +419,24 @@ fn run_loop(
         if program.advance(world.step, world.time, &world.walls, &state) {
             write_row = true;
         }
+        if let Some(phase) = program.phase()
+            && let Some(target) = stress_target(phase)
+            && let Some(reason) = stalled(&world, &state, conserved_area)
+        {
+            let phase = format!("loading[{}] ({})", program.current, phase.name());
+            let reached = stress_reached(&state);
+            let detail = format!("{phase} cannot reach {target}: {reason}; reached {reached}");
+            let state_file = fail(&world, &r, &mut log, "target unreachable", detail)?;
+            return Err(RunError::TargetUnreachable(Box::new(TargetUnreachable {
+                step: world.step,
+                phase,
+                target,
+                reason,
+                reached,
+                last_good_step: r.last_good_step,
+                state_file,
+            })));
+        }
         let limit_reached =
             scenario.output.max_steps > 0 && world.step >= scenario.output.max_steps;
         if write_row || program.finished() || limit_reached {
@@ -345,16 +462,13 @@ fn run_loop(
             || options.stop_after_step == Some(world.step);
         if !ending
             && (stop_requested
-                || (options.checkpoint_every > 0 && world.step % options.checkpoint_every == 0))
+                || (options.checkpoint_every > 0 && world.step % options.checkpoint_every == 0)
+                || options
+                    .checkpoint_seconds
+                    .is_some_and(|s| last_checkpoint.elapsed().as_secs_f64() >= s))
         {
-            write_checkpoint(snapshot(
-                scenario,
-                &world,
-                &program,
-                &r,
-                false,
-                options.checkpoint_every,
-            ))?;
+            write_checkpoint(snapshot(scenario, &world, &program, &r, false, options))?;
+            last_checkpoint = Instant::now();
         }
         if stop_requested && !ending {
             progress.finish();
@@ -395,15 +509,8 @@ fn run_loop(
         }
     }
     progress.finish();
-    if options.checkpoint_every > 0 {
-        write_checkpoint(snapshot(
-            scenario,
-            &world,
-            &program,
-            &r,
-            true,
-            options.checkpoint_every,
-        ))?;
+    if checkpoints_on {
+        write_checkpoint(snapshot(scenario, &world, &program, &r, true, options))?;
     }
     let grains_path = out.join("grains.csv");
     write_grains_csv(&grains_path, &world).map_err(io_error(&grains_path))?;
@@ -428,6 +535,17 @@ fn run_loop(
         max_loaded_inertial_number: r.max_loaded_inertial_number,
         neighbor_builds: world.neighbors.builds,
         mcap_seconds,
+        checkpoints_written,
+        final_box: {
+            use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+            let w = &world.walls;
+            [
+                w[LEFT].point.x,
+                w[RIGHT].point.x,
+                w[BOTTOM].point.y,
+                w[TOP].point.y,
+            ]
+        },
     };
     if let Some(log) = log.take() {
         let t = Instant::now();
@@ -458,6 +576,60 @@ fn log_outcome(s: &RunSummary) -> BTreeMap<String, String> {
         m.insert("eq69_points".into(), n.to_string());
     }
     m
+}
+
+/// The stress target of a phase, for messages (None when it has none): a servo's wall
+/// stresses, and any `MeanStress` stop condition.
+fn stress_target(phase: &Phase) -> Option<String> {
+    let mut parts = Vec::new();
+    if let Phase::Servo { sxx, syy, .. } = phase {
+        parts.push(format!("sxx_c = {sxx}, syy_c = {syy}"));
+    }
+    fn mean_stresses(until: &StopWhen, parts: &mut Vec<String>) {
+        match until {
+            StopWhen::MeanStress(p) => parts.push(format!("p_c = {p}")),
+            StopWhen::Any(list) => list.iter().for_each(|u| mean_stresses(u, parts)),
+            _ => {}
+        }
+    }
+    mean_stresses(phase.until(), &mut parts);
+    (!parts.is_empty()).then(|| format!("{} (compression positive)", parts.join(" or ")))
+}
+
+fn stress_reached(state: &LoadState) -> String {
+    format!(
+        "sxx_c = {:.4e}, syy_c = {:.4e}, p_c = {:.4e} at phi = {:.5}",
+        state.sxx,
+        state.syy,
+        state.mean_stress(),
+        state.phi
+    )
+}
+
+/// Why a phase can no longer raise the stress, if it cannot: the box collapsed, or the grains
+/// fill it: the packing fraction, or for incompressible grains (whose areas stay pi R^2) their
+/// total area over the box area, at [`PHI_LIMIT`] or above.
+fn stalled(world: &World, state: &LoadState, conserved_area: Option<f64>) -> Option<String> {
+    let (width, height) = box_size(&world.walls);
+    if !(width > 0.0 && height > 0.0) {
+        return Some(format!(
+            "the box has collapsed (width {width:.4e}, height {height:.4e})"
+        ));
+    }
+    let filled = conserved_area.map_or(0.0, |a| a / (width * height));
+    if state.phi >= PHI_LIMIT || filled >= PHI_LIMIT {
+        return Some(format!(
+            "the grains fill the box (phi = {:.5}, grain area / box area = {:.5}; the limit is \
+             {PHI_LIMIT})",
+            state.phi,
+            if conserved_area.is_some() {
+                filled
+            } else {
+                state.phi
+            }
+        ));
+    }
+    None
 }
 
 fn program_phases(scenario: &Scenario) -> Vec<&'static str> {
@@ -641,6 +813,14 @@ fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::R
     }
     writeln!(f, "final_phi = {:.6}", s.last.phi)?;
     writeln!(f, "final_p_c = {:.6e}", s.last.p_c)?;
+    // The box as a scenario's sample section takes it, to start a run from grains.csv.
+    let [x0, x1, y0, y1] = s.final_box;
+    writeln!(
+        f,
+        "final_box = (origin: ({x0:?}, {y0:?}), box_width: {:?}, box_height: {:?})",
+        x1 - x0,
+        y1 - y0
+    )?;
     writeln!(
         f,
         "max_loaded_inertial_number = {:.4e}",

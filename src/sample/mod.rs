@@ -38,6 +38,7 @@
 //! assert!(packing_fraction(&grains, 1.0, 1.0) < 0.55);
 //! ```
 
+pub mod file;
 mod math;
 mod placement;
 mod radii;

@@ -1,17 +1,30 @@
 //! Scenario files (RON): what a run simulates, checked field by field before any work starts.
 //!
-//! A scenario names a sample to generate, the material, the model level, the contact and
-//! deformation numerics, the time step, a loading program and the output settings. Every
-//! section but `name`, `sample`, `material` and `loading` has defaults (the paper's values).
+//! A scenario names a sample (to generate, or to read from a file), the material, the model
+//! level, the contact and deformation numerics, the time step, a loading program and the output
+//! settings. Every section but `name`, `sample`, `material` and `loading` has defaults (the
+//! paper's values).
+//!
+//! The parser accepts an optional field written plainly (`file: "grains.csv"`) or as
+//! `Some(...)` (RON's `implicit_some` extension), so that adding optional fields keeps older
+//! scenarios and checkpoints readable.
 
 use crate::boundary::loading::{Phase, StopWhen, StrainRate};
 use crate::contact::SecantLaw;
+use crate::grain::Grain;
 use crate::grain::{Material, ModelLevel};
 use crate::integration::Parameters;
 use crate::integration::parameters::critical_time_step;
-use crate::sample::{RadiusDistribution, SampleError, SampleSpec};
+use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
+use crate::sample::{MAX_COUNT, RadiusDistribution, SampleError, SampleSpec};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Options of the RON parser for scenarios and checkpoints.
+pub fn ron_options() -> ron::Options {
+    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+}
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -20,7 +33,7 @@ pub struct Scenario {
     /// Seed of the sample generator.
     #[serde(default = "default_seed")]
     pub seed: u64,
-    pub sample: SampleSpec,
+    pub sample: SampleSettings,
     pub material: Material,
     #[serde(default)]
     pub model: ModelLevel,
@@ -37,6 +50,189 @@ pub struct Scenario {
 
 fn default_seed() -> u64 {
     1
+}
+
+/// The initial sample: generated (`count` grains with `radii`) or read from `file`, in the box
+/// `[x0, x0 + box_width] x [y0, y0 + box_height]` with `(x0, y0) = origin`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SampleSettings {
+    /// Number of grains to generate (with `file`: optional, must match the file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count: Option<usize>,
+    pub box_width: f64,
+    pub box_height: f64,
+    /// Lower left corner of the box (default (0, 0)).
+    #[serde(default, skip_serializing_if = "is_zero_origin")]
+    pub origin: (f64, f64),
+    /// Radius distribution of a generated sample (not allowed with `file`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radii: Option<RadiusDistribution>,
+    /// A CSV of grains (see [`crate::sample::file`]), relative to the scenario file's folder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// The grains of `file` once read ([`Scenario::load`], [`Scenario::load_sample`]; a
+    /// checkpoint sets the radii of its grains). Not part of the scenario's text.
+    #[serde(skip)]
+    pub loaded: Option<Arc<LoadedSample>>,
+}
+
+fn is_zero_origin(o: &(f64, f64)) -> bool {
+    o.0 == 0.0 && o.1 == 0.0
+}
+
+/// The grains of a sample file, as read and checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedSample {
+    /// The file as opened (the scenario's folder joined with `sample.file`).
+    pub path: PathBuf,
+    pub grains: Vec<Grain>,
+}
+
+impl LoadedSample {
+    pub fn smallest_radius(&self) -> f64 {
+        self.grains
+            .iter()
+            .map(|g| g.radius)
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// What a user wrote is what compares: the grains read from the file are derived from it.
+impl PartialEq for SampleSettings {
+    fn eq(&self, other: &Self) -> bool {
+        self.count == other.count
+            && self.box_width.to_bits() == other.box_width.to_bits()
+            && self.box_height.to_bits() == other.box_height.to_bits()
+            && self.origin.0.to_bits() == other.origin.0.to_bits()
+            && self.origin.1.to_bits() == other.origin.1.to_bits()
+            && self.radii == other.radii
+            && self.file == other.file
+    }
+}
+
+impl SampleSettings {
+    /// Corners of the box.
+    pub fn bounds(&self) -> BoxBounds {
+        BoxBounds {
+            x0: self.origin.0,
+            x1: self.origin.0 + self.box_width,
+            y0: self.origin.1,
+            y1: self.origin.1 + self.box_height,
+        }
+    }
+
+    /// The generation spec of a generated sample (None with `file` or without count/radii).
+    pub fn spec(&self) -> Option<SampleSpec> {
+        match (self.file.is_none(), self.count, &self.radii) {
+            (true, Some(count), Some(radii)) => Some(SampleSpec {
+                count,
+                box_width: self.box_width,
+                box_height: self.box_height,
+                radii: radii.clone(),
+            }),
+            _ => None,
+        }
+    }
+
+    /// Number of grains: `count`, or the file's once read (0 if neither is known).
+    pub fn grain_count(&self) -> usize {
+        match (&self.loaded, self.count) {
+            (Some(l), _) => l.grains.len(),
+            (None, Some(n)) => n,
+            (None, None) => 0,
+        }
+    }
+
+    /// The fields that do not need the file: box, origin, and which of count/radii/file.
+    fn validate_fields(&self) -> Result<(), ScenarioError> {
+        if !(self.origin.0.is_finite() && self.origin.1.is_finite()) {
+            return Err(invalid(
+                "sample.origin",
+                format!("({}, {})", num(self.origin.0), num(self.origin.1)),
+                "two finite numbers (x0, y0)",
+            ));
+        }
+        match &self.file {
+            Some(file) => {
+                if self.radii.is_some() {
+                    return Err(invalid(
+                        "sample.radii",
+                        "given together with sample.file",
+                        "left out: a sample read from a file takes its radii from the file",
+                    ));
+                }
+                if self.count == Some(0) {
+                    return Err(SampleError::ZeroCount.into());
+                }
+                if file.as_os_str().is_empty() {
+                    return Err(invalid(
+                        "sample.file",
+                        "\"\"",
+                        "the path of a CSV of grains",
+                    ));
+                }
+                positive("sample.box_width", self.box_width)?;
+                positive("sample.box_height", self.box_height)?;
+            }
+            None => {
+                if self.count.is_none() {
+                    return Err(invalid(
+                        "sample.count",
+                        "missing",
+                        "a number of grains to generate (at least 1), unless sample.file gives \
+                         the grains",
+                    ));
+                }
+                if self.radii.is_none() {
+                    return Err(invalid(
+                        "sample.radii",
+                        "missing",
+                        "a radius distribution (Gaussian, Fractal, Uniform, Monodisperse), unless \
+                         sample.file gives the grains",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn validate(&self) -> Result<(), ScenarioError> {
+        self.validate_fields()?;
+        if let Some(spec) = self.spec() {
+            return Ok(spec.validate()?);
+        }
+        let file = self.file.as_deref().unwrap_or(Path::new(""));
+        let Some(loaded) = &self.loaded else {
+            return Err(invalid(
+                "sample.file",
+                format!("{:?}", file.display().to_string()),
+                "read before the scenario is used (Scenario::load reads it; a scenario parsed \
+                 from text needs Scenario::load_sample)",
+            ));
+        };
+        let n = loaded.grains.len();
+        if n > MAX_COUNT {
+            return Err(SampleError::TooManyGrains {
+                count: n,
+                max: MAX_COUNT,
+            }
+            .into());
+        }
+        if let Some(count) = self.count
+            && count != n
+        {
+            return Err(invalid(
+                "sample.count",
+                count,
+                &format!(
+                    "the number of grains in {} ({n}), or left out",
+                    loaded.path.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// What to do when a contact leaves the domain of the secant law (SPEC §5).
@@ -116,6 +312,16 @@ impl Default for TimeStep {
     }
 }
 
+/// How often a run writes its checkpoint (see `docs/checkpoints.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum CheckpointInterval {
+    /// After every step that is a multiple of this.
+    EverySteps(u64),
+    /// After the first step that ends at least this many wall-clock seconds after the last
+    /// checkpoint (or the start). Results do not depend on when checkpoints are written.
+    EverySeconds(f64),
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputSettings {
@@ -125,6 +331,10 @@ pub struct OutputSettings {
     pub jamming_pressure: f64,
     /// Hard limit on the number of steps (0 = none).
     pub max_steps: u64,
+    /// Keep the latest checkpoint in `OUT/checkpoint.bin` (the command line's
+    /// `--checkpoint-every` / `--checkpoint-every-seconds` override it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub checkpoint: Option<CheckpointInterval>,
 }
 
 impl Default for OutputSettings {
@@ -133,6 +343,7 @@ impl Default for OutputSettings {
             every: 1000,
             jamming_pressure: 1e-5,
             max_steps: 0,
+            checkpoint: None,
         }
     }
 }
@@ -165,6 +376,8 @@ pub enum ScenarioError {
     },
     #[error(transparent)]
     Sample(#[from] SampleError),
+    #[error(transparent)]
+    SampleFile(#[from] SampleFileError),
 }
 
 fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> ScenarioError {
@@ -182,6 +395,16 @@ fn num(x: f64) -> String {
         format!("{x}")
     } else {
         format!("{x:e}")
+    }
+}
+
+/// A number to four decimals, without trailing zeros (`19`, `0.4375`).
+fn short(x: f64) -> String {
+    let text = format!("{x:.4}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
     }
 }
 
@@ -209,29 +432,67 @@ impl Scenario {
             path: path.display().to_string(),
             source,
         })?;
-        let scenario = Self::parse(&text, &path.display().to_string())?;
+        let mut scenario = Self::parse(&text, &path.display().to_string())?;
+        if scenario.sample.file.is_some() {
+            let base = path.parent().unwrap_or(Path::new(""));
+            scenario.load_sample(base)?;
+        }
         let warnings = scenario.validate()?;
         Ok((scenario, warnings))
+    }
+
+    /// Reads and checks the grains of `sample.file` (a path relative to `base`, the scenario
+    /// file's folder, unless absolute) against the box, each other and the contact law (see
+    /// [`crate::sample::file`]); keeps them in `sample.loaded`. Does nothing for a generated
+    /// sample. The settings the check needs (contact law, contour resolution) are validated
+    /// first.
+    pub fn load_sample(&mut self, base: &Path) -> Result<(), ScenarioError> {
+        let Some(file) = &self.sample.file else {
+            return Ok(());
+        };
+        self.validate_settings()?;
+        self.sample.validate_fields()?;
+        let path = base.join(file);
+        let sample = read_grains(&path)?;
+        check_packing(
+            &path.display().to_string(),
+            &sample,
+            self.sample.bounds(),
+            &self.secant_law(),
+            self.contact.resolution_deg,
+        )?;
+        self.sample.loaded = Some(Arc::new(LoadedSample {
+            path,
+            grains: sample.grains,
+        }));
+        Ok(())
     }
 
     /// Parses RON text; errors carry the line and column of the offending token and quote its
     /// line.
     pub fn parse(text: &str, path: &str) -> Result<Scenario, ScenarioError> {
-        ron::Options::default()
-            .from_str::<Scenario>(text)
-            .map_err(|e| {
-                let (line, column) = token_start(text, e.span.start, e.span.end);
-                ScenarioError::Parse {
-                    path: path.to_string(),
-                    line,
-                    column,
-                    message: format!("{}{}", e.code, excerpt(text, line, column)),
-                }
-            })
+        ron_options().from_str::<Scenario>(text).map_err(|e| {
+            let (line, column) = token_start(text, e.span.start, e.span.end);
+            ScenarioError::Parse {
+                path: path.to_string(),
+                line,
+                column,
+                message: format!("{}{}", e.code, excerpt(text, line, column)),
+            }
+        })
     }
 
-    /// Checks every field; returns warnings for legal but suspicious choices.
+    /// Checks every field; returns warnings for legal but suspicious choices. A sample read
+    /// from a file must have been read ([`Scenario::load_sample`]).
     pub fn validate(&self) -> Result<Vec<String>, ScenarioError> {
+        self.sample.validate()?;
+        let mut warnings = self.validate_settings()?;
+        self.validate_time_step(&mut warnings)?;
+        Ok(warnings)
+    }
+
+    /// Every check that needs neither the sample nor the time step.
+    fn validate_settings(&self) -> Result<Vec<String>, ScenarioError> {
         let mut warnings = Vec::new();
         if self.name.trim().is_empty()
             || self.name == "."
@@ -246,7 +507,6 @@ impl Scenario {
                  out/<name>)",
             ));
         }
-        self.sample.validate()?;
         let m = &self.material;
         positive("material.young", m.young)?;
         positive("material.density", m.density)?;
@@ -291,6 +551,131 @@ impl Scenario {
         if c.damping == 0.0 {
             warnings.push("contact.damping = 0: nothing dissipates energy at contacts; a compaction will not be quasi-static".into());
         }
+        if self.loading.is_empty() {
+            return Err(invalid("loading", "[]", "a list of at least one phase"));
+        }
+        for (k, phase) in self.loading.iter().enumerate() {
+            let field = format!("loading[{k}]");
+            match phase {
+                Phase::Isotropic { rate, until, .. } | Phase::Oedometric { rate, until, .. } => {
+                    validate_rate(&format!("{field}.rate"), rate, &mut warnings)?;
+                    validate_until(&format!("{field}.until"), until)?;
+                }
+                Phase::Servo {
+                    sxx,
+                    syy,
+                    gain,
+                    max_rate,
+                    until,
+                } => {
+                    compressive_target(&format!("{field}.sxx"), *sxx)?;
+                    compressive_target(&format!("{field}.syy"), *syy)?;
+                    positive(&format!("{field}.gain"), *gain)?;
+                    if *gain > 1.0 {
+                        warnings.push(format!(
+                            "{field}.gain = {gain}: the contact dashpot feeds the wall velocity back into \
+                             the wall stress; gains above ~1 can make the servo oscillate (0.5 is stable)"
+                        ));
+                    }
+                    positive(&format!("{field}.max_rate"), *max_rate)?;
+                    validate_until(&format!("{field}.until"), until)?;
+                    // The servo holds p_c at the mean of its targets: a phase that can only end
+                    // on a higher mean stress would never end.
+                    let held = 0.5 * (sxx + syy);
+                    let mut stresses = Vec::new();
+                    stress_conditions(&format!("{field}.until"), until, &mut stresses);
+                    if only_stress_conditions(until)
+                        && let Some((f, p)) = stresses.iter().find(|(_, p)| *p > held)
+                    {
+                        return Err(invalid(
+                            f,
+                            format!("MeanStress({})", num(*p)),
+                            &format!(
+                                "at most the mean stress the servo holds, (sxx + syy)/2 = {}, or \
+                                 combined with a condition that can end the phase (Any([.., Steps(n)])): \
+                                 the phase would never end",
+                                num(held)
+                            ),
+                        ));
+                    }
+                }
+                Phase::Relax { until } => {
+                    validate_until(&format!("{field}.until"), until)?;
+                    if only_stress_conditions(until) {
+                        warnings.push(format!(
+                            "{field}: a Relax phase that ends only on MeanStress: the walls stand \
+                             still and p_c only relaxes, so it ends at once or never"
+                        ));
+                    }
+                }
+            }
+            let mut targets = Vec::new();
+            if let Phase::Servo { sxx, syy, .. } = phase {
+                targets.push((format!("{field}.sxx"), *sxx));
+                targets.push((format!("{field}.syy"), *syy));
+            }
+            stress_conditions(&format!("{field}.until"), phase.until(), &mut targets);
+            for (f, target) in targets {
+                self.stress_target_warning(&f, target, &mut warnings);
+            }
+        }
+        if self.output.every == 0 {
+            return Err(invalid("output.every", 0, "at least 1 step"));
+        }
+        positive("output.jamming_pressure", self.output.jamming_pressure)?;
+        match self.output.checkpoint {
+            Some(CheckpointInterval::EverySteps(0)) => {
+                return Err(invalid(
+                    "output.checkpoint",
+                    "EverySteps(0)",
+                    "EverySteps(n) with n >= 1, or EverySeconds(s) with s > 0",
+                ));
+            }
+            Some(CheckpointInterval::EverySeconds(s)) => {
+                positive("output.checkpoint.EverySeconds", s)?;
+            }
+            _ => {}
+        }
+        Ok(warnings)
+    }
+
+    /// The largest mean stress the contact law can carry before it leaves its domain (None when
+    /// it cannot leave it: `Cap`, or b <= 1). A grain's mean Love–Weber stress is
+    /// `sum(F_k r_k) / (2 A)`; with `r_k ~ R`, `A ~ pi R^2` and the contact lengths adding up to at
+    /// most the perimeter `2 pi R`, and `|F| / L_c = E |eps_n|` below
+    /// `E (1 - floor) / ((b - 1) floor)` inside the domain, p_c stays below that bound.
+    pub fn law_stress_limit(&self) -> Option<f64> {
+        let c = &self.contact;
+        (c.on_domain_exit == DomainExitPolicy::Stop && c.b > 1.0)
+            .then(|| self.material.young * (1.0 - c.domain_floor) / ((c.b - 1.0) * c.domain_floor))
+    }
+
+    fn stress_target_warning(&self, field: &str, target: f64, warnings: &mut Vec<String>) {
+        let young = self.material.young;
+        if let Some(limit) = self.law_stress_limit()
+            && target >= limit
+        {
+            warnings.push(format!(
+                "{field} = {}: above the largest mean stress the contact law can carry, about \
+                 E (1 - domain_floor) / ((b - 1) domain_floor) = {}: contacts will leave the law's \
+                 domain first and the run will stop there",
+                num(target),
+                short(limit)
+            ));
+        } else if target >= STRESS_WARNING_FRACTION * young {
+            warnings.push(format!(
+                "{field} = {}: {:.2} x E, of the order of the grains' Young's modulus: grains \
+                 strain by tens of percent and the packing fraction approaches 1 long before; the \
+                 run stops with an error if the phase can no longer progress",
+                num(target),
+                target / young
+            ));
+        }
+    }
+
+    /// The time step against its critical estimate (which needs the smallest radius).
+    fn validate_time_step(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
+        let m = &self.material;
         let critical = self.critical_time_step();
         match self.time_step {
             TimeStep::FractionOfCritical(f) => {
@@ -323,58 +708,33 @@ impl Scenario {
                      smallest radius {} with material.young = {} and material.density = {}: \
                      rescale the material or sample.radii",
                     num(critical),
-                    num(smallest_radius(&self.sample.radii)),
+                    num(self.smallest_radius()),
                     num(m.young),
                     num(m.density)
                 ),
             ));
         }
-        if self.loading.is_empty() {
-            return Err(invalid("loading", "[]", "a list of at least one phase"));
-        }
-        for (k, phase) in self.loading.iter().enumerate() {
-            let field = format!("loading[{k}]");
-            match phase {
-                Phase::Isotropic { rate, until, .. } | Phase::Oedometric { rate, until, .. } => {
-                    validate_rate(&format!("{field}.rate"), rate, &mut warnings)?;
-                    validate_until(&format!("{field}.until"), until)?;
-                }
-                Phase::Servo {
-                    sxx,
-                    syy,
-                    gain,
-                    max_rate,
-                    until,
-                } => {
-                    non_negative(&format!("{field}.sxx"), *sxx)?;
-                    non_negative(&format!("{field}.syy"), *syy)?;
-                    positive(&format!("{field}.gain"), *gain)?;
-                    if *gain > 1.0 {
-                        warnings.push(format!(
-                            "{field}.gain = {gain}: the contact dashpot feeds the wall velocity back into \
-                             the wall stress; gains above ~1 can make the servo oscillate (0.5 is stable)"
-                        ));
-                    }
-                    positive(&format!("{field}.max_rate"), *max_rate)?;
-                    validate_until(&format!("{field}.until"), until)?;
-                }
-                Phase::Relax { until } => validate_until(&format!("{field}.until"), until)?,
-            }
-        }
-        if self.output.every == 0 {
-            return Err(invalid("output.every", 0, "at least 1 step"));
-        }
-        positive("output.jamming_pressure", self.output.jamming_pressure)?;
-        Ok(warnings)
+        Ok(())
     }
 
     pub fn critical_time_step(&self) -> f64 {
         critical_time_step(
             &self.material,
             &self.secant_law(),
-            smallest_radius(&self.sample.radii),
+            self.smallest_radius(),
             self.model,
         )
+    }
+
+    /// The smallest grain radius, which sets the critical time step: the distribution's lower
+    /// bound for a generated sample, the smallest radius of the file's grains otherwise (NaN
+    /// while the file is not read).
+    pub fn smallest_radius(&self) -> f64 {
+        match (&self.sample.loaded, &self.sample.radii) {
+            (Some(l), _) => l.smallest_radius(),
+            (None, Some(r)) => r.min_radius(),
+            (None, None) => f64::NAN,
+        }
     }
 
     pub fn time_step_value(&self) -> f64 {
@@ -459,16 +819,6 @@ fn excerpt(text: &str, line: usize, column: usize) -> String {
     format!("\n {number} | {head}{shown}{tail}\n {gutter} | {pad}^")
 }
 
-/// Smallest radius a distribution can produce (the critical time step is set by it).
-fn smallest_radius(radii: &RadiusDistribution) -> f64 {
-    match *radii {
-        RadiusDistribution::Gaussian { min, .. }
-        | RadiusDistribution::Fractal { min, .. }
-        | RadiusDistribution::Uniform { min, .. } => min,
-        RadiusDistribution::Monodisperse { radius } => radius,
-    }
-}
-
 fn validate_rate(
     field: &str,
     rate: &StrainRate,
@@ -512,6 +862,45 @@ fn validate_rate(
     Ok(())
 }
 
+/// A stress target at or above this fraction of E gets a warning.
+pub const STRESS_WARNING_FRACTION: f64 = 0.5;
+
+/// A target wall stress (compression positive): finite and > 0.
+fn compressive_target(field: &str, value: f64) -> Result<(), ScenarioError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(
+            field,
+            num(value),
+            "a finite compressive stress > 0 (compression positive): frictionless grains carry \
+             no tension, and a zero target would open the box without end",
+        ))
+    }
+}
+
+/// The `MeanStress` conditions of a stop condition, with their field names.
+fn stress_conditions(field: &str, until: &StopWhen, out: &mut Vec<(String, f64)>) {
+    match until {
+        StopWhen::MeanStress(p) => out.push((field.to_string(), *p)),
+        StopWhen::Any(list) => {
+            for (k, u) in list.iter().enumerate() {
+                stress_conditions(&format!("{field}[{k}]"), u, out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Whether a stop condition can only be met by a mean stress.
+fn only_stress_conditions(until: &StopWhen) -> bool {
+    match until {
+        StopWhen::MeanStress(_) => true,
+        StopWhen::Any(list) => list.iter().all(only_stress_conditions),
+        _ => false,
+    }
+}
+
 fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
     match until {
         StopWhen::PackingFraction(phi) => {
@@ -519,7 +908,7 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
                 return Err(invalid(field, num(*phi), "a packing fraction in (0, 1)"));
             }
         }
-        StopWhen::MeanStress(p) => positive(field, *p)?,
+        StopWhen::MeanStress(p) => compressive_target(field, *p)?,
         StopWhen::Time(t) => positive(field, *t)?,
         StopWhen::Strain(e) => {
             if !(e.is_finite() && *e > 0.0 && *e < 1.0) {
