@@ -267,6 +267,12 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 out_dir.display()
             );
+            if let Some(a) = parsed.parameters().adaptive {
+                eprintln!(
+                    "sdem: adaptive model level: dt = {:.3e} while every grain is rigid, {:.3e} once one deforms",
+                    a.dt[0], a.dt[2]
+                );
+            }
             // On a terminal: a progress bar (after a few seconds); otherwise a line every 30 s.
             let terminal = std::io::stderr().is_terminal();
             let options = RunOptions {
@@ -399,6 +405,13 @@ fn run(cli: Cli) -> Result<()> {
                 parsed.critical_time_step()
             );
             println!("time step: {:.4e}", parsed.time_step_value());
+            if let Some(a) = parsed.parameters().adaptive {
+                println!(
+                    "adaptive model level: time step {:.4e} while every grain is rigid (critical {:.4e})",
+                    a.dt[0],
+                    parsed.rigid_critical_time_step()
+                );
+            }
         }
         Command::Inspect { file } => inspect(&file)?,
         Command::Render {

@@ -3,9 +3,12 @@
 
 usage: tools/sweep.py [--scenario scenarios/isotropic_A.ron] [--out out/sweep] [--phi-end 0.92]
                       [--sdem target/release/sdem] [--threads 1] [--quick]
+                      [--adaptive off|on] [--only LABEL,...]
 
 Each variant changes the contour resolution dbeta, the time step (fraction of the critical
-estimate) or the model level of the base scenario, stops the isotropic compaction at
+estimate) or the model level of the base scenario (Full, Volumetric, or Adaptive(): the
+per-grain adaptive level with its default thresholds; --adaptive on adds the adaptive variant of
+every full-model point of the grid; --only runs a few named points), stops the isotropic compaction at
 --phi-end, and runs `sdem run` on it. For each run the tool records its cost (wall seconds,
 grain-steps/s) and two errors of its p_c(phi) curve, over phi in [0.86, phi_end]:
   - against the finest run of the grid (smallest dbeta, smallest dt, full model): RMS relative
@@ -26,7 +29,7 @@ def variant_text(base, resolution, fraction, model, phi_end, name):
     t = re.sub(r'name: "[^"]*"', f'name: "{name}"', base)
     t = re.sub(r"resolution_deg: [0-9.eE+-]+", f"resolution_deg: {resolution}", t)
     t = re.sub(r"FractionOfCritical\([0-9.eE+-]+\)", f"FractionOfCritical({fraction})", t)
-    t = re.sub(r"model: \w+", f"model: {model}", t)
+    t = re.sub(r"model: \w+(\([^)]*\))?", f"model: {model}", t)
     t = re.sub(r"until: PackingFraction\([0-9.]+\)", f"until: PackingFraction({phi_end})", t)
     return t
 
@@ -86,6 +89,9 @@ def main():
     ap.add_argument("--sdem", default="target/release/sdem")
     ap.add_argument("--threads", default="1")
     ap.add_argument("--quick", action="store_true", help="only dbeta 1, 4 and dt 0.4")
+    ap.add_argument("--adaptive", choices=["off", "on"], default="off",
+                    help="on: also run each full-model point with model Adaptive()")
+    ap.add_argument("--only", default="", help="comma-separated labels: run only these grid points")
     a = ap.parse_args()
     base = pathlib.Path(a.scenario).read_text()
     out = pathlib.Path(a.out); out.mkdir(parents=True, exist_ok=True)
@@ -93,9 +99,15 @@ def main():
             (1.0, 0.2, "Full"), (1.0, 0.8, "Full"), (1.0, 0.4, "Volumetric")]
     if a.quick:
         grid = [(1.0, 0.4, "Full"), (4.0, 0.4, "Full")]
+    if a.adaptive == "on":
+        grid += [(r, f, "Adaptive()") for r, f, m in grid if m == "Full"]
+    label = lambda r, f, m: f"d{r:g}_t{f:g}_{m.rstrip('()')}"
+    if a.only:
+        wanted = set(a.only.split(","))
+        grid = [g for g in grid if label(*g) in wanted]
     rows = []
     for resolution, fraction, model in grid:
-        name = f"d{resolution:g}_t{fraction:g}_{model}"
+        name = label(resolution, fraction, model)
         run_dir = out / name
         if not (run_dir / "summary.txt").exists():
             scenario = out / f"{name}.ron"

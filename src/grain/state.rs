@@ -10,7 +10,10 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 /// Which degrees of freedom a grain has (SPEC §1). All levels share one contact geometry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+/// Ordered from the fewest degrees of freedom to the most.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize,
+)]
 pub enum ModelLevel {
     /// Level 0: rigid discs (x, y, theta).
     Rigid,
@@ -19,6 +22,16 @@ pub enum ModelLevel {
     /// Level 3: the full SDEM grain (x, y, theta, eps1, eps2, alpha).
     #[default]
     Full,
+}
+
+impl ModelLevel {
+    pub const ALL: [ModelLevel; 3] = [ModelLevel::Rigid, ModelLevel::Volumetric, ModelLevel::Full];
+
+    /// 0, 1, 2 for Rigid, Volumetric, Full (an index, not the paper's level number).
+    #[inline]
+    pub fn index(self) -> usize {
+        self as usize
+    }
 }
 
 /// One grain. Angles in radians; strains are principal stretches minus one (semi-axes

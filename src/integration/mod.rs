@@ -21,8 +21,9 @@ use crate::geometry::broadphase::NeighborList;
 use crate::geometry::{
     ContourTable, GrainShape, Overlap, PairHint, grain_grain_hinted, grain_wall,
 };
+use crate::grain::adaptive::stress_invariants;
 use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
-use crate::grain::{Grain, ModelLevel};
+use crate::grain::{Grain, GrainLevel, ModelLevel};
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
 
@@ -103,6 +104,8 @@ pub struct StepTotals {
     pub contacts: u64,
     /// Contacts whose law denominator was held at its floor this step.
     pub capped_contacts: u64,
+    /// Grains at each level (Rigid, Volumetric, Full) for the next step.
+    pub level_counts: [u64; 3],
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -126,6 +129,8 @@ pub struct World {
     pub pair_contacts: Vec<PairContact>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
+    /// Each grain's model level (all at `params.level` unless the level is adaptive).
+    levels: Vec<GrainLevel>,
     /// Per-step scratch for the broad phase (kept to avoid an allocation every step).
     centers: Vec<DVec2>,
     reach: Vec<f64>,
@@ -138,7 +143,13 @@ impl World {
         let mean_radius = grains.iter().map(|g| g.radius).sum::<f64>() / grains.len().max(1) as f64;
         let skin = params.skin_fraction * mean_radius;
         let n = grains.len();
-        Self {
+        // Adaptive: every grain starts rigid (a generated sample is at rest without contacts).
+        let start = if params.adaptive.is_some() {
+            ModelLevel::Rigid
+        } else {
+            params.level
+        };
+        let mut world = Self {
             params,
             table,
             grains,
@@ -150,8 +161,42 @@ impl World {
             pair_contacts: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
+            levels: vec![GrainLevel::new(start); n],
             centers: Vec::with_capacity(n),
             reach: Vec::with_capacity(n),
+        };
+        world.count_levels();
+        world
+    }
+
+    /// Each grain's model level and the steps it has spent there.
+    pub fn levels(&self) -> &[GrainLevel] {
+        &self.levels
+    }
+
+    /// Sets every grain's level (a resumed run); with the adaptive level the time step follows.
+    pub fn set_levels(&mut self, levels: &[GrainLevel]) {
+        assert_eq!(levels.len(), self.grains.len(), "one level per grain");
+        self.levels.copy_from_slice(levels);
+        self.count_levels();
+    }
+
+    /// Recounts the grains at each level and sets the adaptive time step from the highest one.
+    fn count_levels(&mut self) {
+        let mut counts = [0; 3];
+        for l in &self.levels {
+            counts[l.level.index()] += 1;
+        }
+        self.totals.level_counts = counts;
+        self.apply_adaptive_dt();
+    }
+
+    /// The adaptive time step: that of the highest level any grain is at.
+    fn apply_adaptive_dt(&mut self) {
+        if let Some(adaptive) = &self.params.adaptive {
+            let counts = &self.totals.level_counts;
+            let highest = (0..3).rev().find(|&k| counts[k] > 0).unwrap_or(0);
+            self.params.dt = adaptive.dt[highest];
         }
     }
 
@@ -296,10 +341,16 @@ impl World {
             .grains
             .par_chunks_mut(GRAIN_CHUNK)
             .zip(self.grain_stress.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.levels.par_chunks_mut(GRAIN_CHUNK))
             .enumerate()
-            .map(|(chunk, (grains, stresses))| {
+            .map(|(chunk, ((grains, stresses), levels))| {
                 let mut sums = ChunkSums::default();
-                for (k, (grain, stress)) in grains.iter_mut().zip(stresses.iter_mut()).enumerate() {
+                for (k, ((grain, stress), level)) in grains
+                    .iter_mut()
+                    .zip(stresses.iter_mut())
+                    .zip(levels.iter_mut())
+                    .enumerate()
+                {
                     let g = chunk * GRAIN_CHUNK + k;
                     let frame = &frames[g];
                     let mut load = ContactLoad::default();
@@ -362,7 +413,8 @@ impl World {
                             }
                         }
                     }
-                    let update = advance_grain(params, grain, &load, g, step);
+                    let update = advance_grain(params, grain, level, &load, g, step);
+                    sums.totals.level_counts[level.level.index()] += 1;
                     *stress = update.stress;
                     if let Err(e) = update.result {
                         sums.failure.get_or_insert(e);
@@ -392,6 +444,9 @@ impl World {
             totals.kinetic_energy += sums.totals.kinetic_energy;
             totals.elastic_energy += sums.totals.elastic_energy;
             totals.capped_contacts += sums.totals.capped_contacts;
+            for l in 0..3 {
+                totals.level_counts[l] += sums.totals.level_counts[l];
+            }
             contact_ends += sums.contact_ends;
         }
         totals.contacts = contact_ends / 2;
@@ -402,6 +457,8 @@ impl World {
         self.time += dt;
         self.step += 1;
         self.totals = totals;
+        // The next step's time step, from the levels the grains chose (a fixed-order sum).
+        self.apply_adaptive_dt();
         Ok(&self.totals)
     }
 
@@ -486,6 +543,7 @@ struct GrainUpdate {
 fn advance_grain(
     params: &Parameters,
     grain: &mut Grain,
+    level: &mut GrainLevel,
     load: &ContactLoad,
     index: usize,
     step: u64,
@@ -527,15 +585,21 @@ fn advance_grain(
     let inv_modal_mass = 4.0 / (density * grain.radius * grain.radius);
     let damping = params.deformation_damping;
     let (s11, s22) = (ext11 - sigma1, ext22 - sigma2);
-    match params.level {
+    match level.level {
         ModelLevel::Rigid => {}
         ModelLevel::Volumetric => {
-            // eps1 = eps2 = eps: generalized mass 2 M_eps, force pi R^2 (s11 + s22).
-            let acc = 0.5 * inv_modal_mass * (s11 + s22) - damping * grain.eps1_rate;
-            grain.eps1_rate += acc * dt;
-            grain.eps2_rate = grain.eps1_rate;
-            grain.eps1 += grain.eps1_rate * dt;
-            grain.eps2 = grain.eps1;
+            // The mean strain eps evolves, the deviator eps1 - eps2 and alpha are held (zero for
+            // a grain that never deformed: then eps1 = eps2 = eps): generalized mass 2 M_eps,
+            // force pi R^2 (s11 + s22).
+            let mean_rate = 0.5 * (grain.eps1_rate + grain.eps2_rate);
+            let acc = 0.5 * inv_modal_mass * (s11 + s22) - damping * mean_rate;
+            let mean_rate = mean_rate + acc * dt;
+            let half_difference = 0.5 * (grain.eps1 - grain.eps2);
+            let mean = 0.5 * (grain.eps1 + grain.eps2) + mean_rate * dt;
+            grain.eps1_rate = mean_rate;
+            grain.eps2_rate = mean_rate;
+            grain.eps1 = mean + half_difference;
+            grain.eps2 = mean - half_difference;
         }
         ModelLevel::Full => {
             grain.eps1_rate += (inv_modal_mass * s11 - damping * grain.eps1_rate) * dt;
@@ -553,7 +617,7 @@ fn advance_grain(
             grain.alpha += grain.alpha_rate * dt;
         }
     }
-    if material.is_incompressible() && params.level != ModelLevel::Rigid {
+    if material.is_incompressible() && level.level != ModelLevel::Rigid {
         // SPEC §6: keep the deviator, restore the area; the mean strain rate follows the
         // corrected mean strain so that rates stay consistent with positions.
         let mean_before =
@@ -567,12 +631,43 @@ fn advance_grain(
         grain.eps2_rate = mean_rate - half_difference_rate;
     }
 
+    if let Some(adaptive) = &params.adaptive {
+        let (mean, deviator) = stress_invariants(stress.external);
+        let inv_young = 1.0 / material.young;
+        let next = adaptive
+            .settings
+            .next_level(*level, mean * inv_young, deviator * inv_young);
+        if next.level < level.level {
+            freeze(grain, next.level);
+        }
+        *level = next;
+    }
+
     let result = check_grain(grain, material.young / density, index, step);
     GrainUpdate {
         result,
         stress,
         area: current_area,
         elastic_energy,
+    }
+}
+
+/// Zeroes the rates of the degrees of freedom a grain loses when it steps down to `level`; the
+/// values themselves are held (the shape does not jump).
+fn freeze(grain: &mut Grain, level: ModelLevel) {
+    match level {
+        ModelLevel::Rigid => {
+            grain.eps1_rate = 0.0;
+            grain.eps2_rate = 0.0;
+            grain.alpha_rate = 0.0;
+        }
+        ModelLevel::Volumetric => {
+            let mean_rate = 0.5 * (grain.eps1_rate + grain.eps2_rate);
+            grain.eps1_rate = mean_rate;
+            grain.eps2_rate = mean_rate;
+            grain.alpha_rate = 0.0;
+        }
+        ModelLevel::Full => {}
     }
 }
 

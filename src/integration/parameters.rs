@@ -1,12 +1,15 @@
 //! Numerical and physical parameters of the time step, and the critical time step (SPEC §9).
 
 use crate::contact::SecantLaw;
-use crate::grain::{Material, ModelLevel};
+use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Parameters {
     pub material: Material,
+    /// The model level of every grain; with `adaptive`, the highest level a grain may reach.
     pub level: ModelLevel,
+    /// The adaptive level (issue #6): each grain picks its own level; `None`: all at `level`.
+    pub adaptive: Option<Adaptive>,
     pub law: SecantLaw,
     /// Contour resolution dbeta, degrees.
     pub resolution_deg: f64,
@@ -31,6 +34,7 @@ impl Parameters {
         Self {
             material,
             level: ModelLevel::Full,
+            adaptive: None,
             law: SecantLaw::new(material.young, 0.58, 2.0),
             resolution_deg: 1.0,
             contact_damping: 1.0,
@@ -39,6 +43,33 @@ impl Parameters {
             alpha_mass_scale: 1.0,
             dt,
             skin_fraction: 0.2,
+        }
+    }
+}
+
+/// The adaptive level: its thresholds and the time step for each highest level present.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Adaptive {
+    pub settings: AdaptiveSettings,
+    /// Time step while the highest level of any grain is Rigid, Volumetric, Full
+    /// (indexed by [`ModelLevel::index`]). Rigid grains have no deformation coupling, so their
+    /// critical step is sqrt(5) times larger (see [`stiffest_modes`]).
+    pub dt: [f64; 3],
+}
+
+impl Adaptive {
+    /// `fraction` of the critical step of each level, for the smallest grain.
+    pub fn fraction_of_critical(
+        settings: AdaptiveSettings,
+        fraction: f64,
+        material: &Material,
+        law: &SecantLaw,
+        min_radius: f64,
+    ) -> Self {
+        Self {
+            settings,
+            dt: ModelLevel::ALL
+                .map(|level| fraction * critical_time_step(material, law, min_radius, level)),
         }
     }
 }

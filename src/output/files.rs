@@ -22,15 +22,33 @@ impl MacroWriter {
     /// written after a checkpoint, a partly written line) is cut off, then rows are appended.
     /// Fails if the file has another header or fewer than `rows` complete rows.
     pub fn resume(path: &Path, rows: u64) -> std::io::Result<Self> {
+        Self::resume_upgrading(path, rows, None)
+    }
+
+    /// [`MacroWriter::resume`], also accepting a `macro.csv` written before the level columns
+    /// when `levels` (the grains at each level of a run without the adaptive level) is given:
+    /// its header and kept rows get the level columns.
+    pub fn resume_upgrading(
+        path: &Path,
+        rows: u64,
+        levels: Option<[u64; 3]>,
+    ) -> std::io::Result<Self> {
         let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
         let bytes = std::fs::read(path)?;
         let mut end = 0usize;
         let mut lines = 0u64;
+        let mut legacy = false;
         while lines < rows + 1 {
             match bytes[end..].iter().position(|&b| b == b'\n') {
                 Some(k) => {
                     if lines == 0 && &bytes[..end + k] != Measures::HEADER.as_bytes() {
-                        return Err(bad("not a macro.csv of this sdem (header differs)".into()));
+                        legacy = levels.is_some()
+                            && &bytes[..end + k] == Measures::HEADER_WITHOUT_LEVELS.as_bytes();
+                        if !legacy {
+                            return Err(
+                                bad("not a macro.csv of this sdem (header differs)".into()),
+                            );
+                        }
                     }
                     end += k + 1;
                     lines += 1;
@@ -42,6 +60,25 @@ impl MacroWriter {
                     )));
                 }
             }
+        }
+        if let (true, Some(levels)) = (legacy, levels) {
+            let text = String::from_utf8_lossy(&bytes[..end]);
+            let fill = format!(",{},{},{}", levels[0], levels[1], levels[2]);
+            let mut upgraded = String::with_capacity(end + (rows as usize + 1) * fill.len());
+            for (k, line) in text.lines().enumerate() {
+                if k == 0 {
+                    upgraded.push_str(Measures::HEADER);
+                } else {
+                    upgraded.push_str(line);
+                    upgraded.push_str(&fill);
+                }
+                upgraded.push('\n');
+            }
+            std::fs::write(path, upgraded)?;
+            let file = std::fs::OpenOptions::new().append(true).open(path)?;
+            return Ok(Self {
+                out: BufWriter::new(file),
+            });
         }
         let file = std::fs::OpenOptions::new().write(true).open(path)?;
         file.set_len(end as u64)?;

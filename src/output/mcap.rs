@@ -44,7 +44,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 /// Version of the channel layout below; stored in the `sdem.run` metadata.
-pub const FORMAT_VERSION: &str = "1";
+/// 2: `/macro` gained `grains_rigid`, `grains_volumetric`, `grains_full` (adaptive level).
+pub const FORMAT_VERSION: &str = "2";
 
 pub const TOPIC_GRAINS: &str = "/grains";
 pub const TOPIC_CONTACTS: &str = "/contacts";
@@ -125,6 +126,9 @@ float64 box_width
 float64 box_height
 uint64 contacts
 uint64 capped_contacts
+uint64 grains_rigid
+uint64 grains_volumetric
+uint64 grains_full
 ";
 
 /// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that `/scene` uses (entities
@@ -627,6 +631,9 @@ fn encode_macro(buf: &mut Vec<u8>, m: &Measures) {
     }
     w.u64(m.contacts);
     w.u64(m.capped_contacts);
+    for n in m.levels {
+        w.u64(n);
+    }
 }
 
 fn decode_macro(data: &[u8]) -> CdrResult<Measures> {
@@ -650,6 +657,7 @@ fn decode_macro(data: &[u8]) -> CdrResult<Measures> {
         box_height: r.f64()?,
         contacts: r.u64()?,
         capped_contacts: r.u64()?,
+        levels: [r.u64()?, r.u64()?, r.u64()?],
     })
 }
 
@@ -943,7 +951,13 @@ impl TrajectoryWriter {
             ("young", format!("{:e}", p.material.young)),
             ("poisson", format!("{}", p.material.poisson)),
             ("density", format!("{:e}", p.material.density)),
-            ("model", format!("{:?}", p.level)),
+            (
+                "model",
+                match &p.adaptive {
+                    Some(a) => format!("Adaptive({:?})", a.settings),
+                    None => format!("{:?}", p.level),
+                },
+            ),
             ("dt", format!("{:e}", p.dt)),
             ("resolution_deg", format!("{}", p.resolution_deg)),
             ("contour_nodes", world.table.nodes.to_string()),

@@ -33,10 +33,15 @@ pub struct Measures {
     pub box_height: f64,
     pub contacts: u64,
     pub capped_contacts: u64,
+    /// Grains at each model level (Rigid, Volumetric, Full) for the next step.
+    pub levels: [u64; 3],
 }
 
 impl Measures {
-    pub const HEADER: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts";
+    pub const HEADER: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts,grains_rigid,grains_volumetric,grains_full";
+
+    /// The header before the level columns (macro.csv of sdem before the adaptive level).
+    pub const HEADER_WITHOUT_LEVELS: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts";
 
     /// Wall stresses and packing fraction only: cheap enough for every step.
     pub fn box_state(world: &World) -> (f64, f64, f64, f64, f64) {
@@ -86,12 +91,13 @@ impl Measures {
             box_height,
             contacts: world.totals.contacts,
             capped_contacts: world.totals.capped_contacts,
+            levels: world.totals.level_counts,
         }
     }
 
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{:.9e},{},{:.9},{:.9e},{:.9e},{:.9e},{:.9e},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.9},{:.9},{},{}",
+            "{},{:.9e},{},{:.9},{:.9e},{:.9e},{:.9e},{:.9e},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.9},{:.9},{},{},{},{},{}",
             self.step,
             self.time,
             self.phase,
@@ -109,7 +115,10 @@ impl Measures {
             self.box_width,
             self.box_height,
             self.contacts,
-            self.capped_contacts
+            self.capped_contacts,
+            self.levels[0],
+            self.levels[1],
+            self.levels[2]
         )
     }
 }

@@ -108,6 +108,11 @@ pub fn read_macro_csv(path: &Path) -> Result<Vec<Measures>, String> {
             box_height: float("box_height")?,
             contacts: int("contacts")?,
             capped_contacts: int("capped_contacts")?,
+            levels: [
+                int("grains_rigid")?,
+                int("grains_volumetric")?,
+                int("grains_full")?,
+            ],
         });
     }
     Ok(rows)

@@ -22,7 +22,7 @@
 use super::Jamming;
 use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
-use crate::grain::Grain;
+use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::integration::{MAX_WALLS, StepTotals};
 use crate::scenario::{LoadedSample, Scenario};
 use glam::DVec2;
@@ -169,6 +169,10 @@ pub struct TotalsBits {
     pub elastic_energy: Bits,
     pub contacts: u64,
     pub capped_contacts: u64,
+    /// Grains at each level (zero in checkpoints of sdem before the adaptive level; a resumed
+    /// run recounts them from the grains' levels).
+    #[serde(default)]
+    pub level_counts: [u64; 3],
 }
 
 impl From<&StepTotals> for TotalsBits {
@@ -180,6 +184,7 @@ impl From<&StepTotals> for TotalsBits {
             elastic_energy: t.elastic_energy.into(),
             contacts: t.contacts,
             capped_contacts: t.capped_contacts,
+            level_counts: t.level_counts,
         }
     }
 }
@@ -200,6 +205,7 @@ impl TotalsBits {
             elastic_energy: self.elastic_energy.into(),
             contacts: self.contacts,
             capped_contacts: self.capped_contacts,
+            level_counts: self.level_counts,
         })
     }
 }
@@ -260,6 +266,9 @@ pub struct RunnerState {
     pub last_good: Vec<Grain>,
     /// Data rows of macro.csv written so far (header not counted).
     pub macro_rows: u64,
+    /// Each grain's level at the checkpoint's step, with the adaptive model only (empty
+    /// otherwise: every grain is at the scenario's level).
+    pub levels: Vec<GrainLevel>,
 }
 
 /// A checkpoint as stored (see the module documentation).
@@ -288,6 +297,11 @@ pub struct Stored {
     pub last_good_step: u64,
     pub last_good: Vec<GrainBits>,
     pub macro_rows: u64,
+    /// Adaptive model only: each grain's (level index, steps at that level, steps its stress
+    /// has asked for a higher level). Absent from the checkpoints of other runs, and of the
+    /// sdem versions before the adaptive level.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub levels: Vec<[u32; 3]>,
 }
 
 /// A checkpoint in memory.
@@ -346,6 +360,11 @@ impl Checkpoint {
             last_good_step: r.last_good_step,
             last_good: grains_bits(&r.last_good),
             macro_rows: r.macro_rows,
+            levels: r
+                .levels
+                .iter()
+                .map(|l| [l.level.index() as u32, l.steps, l.pending])
+                .collect(),
         }
     }
 
@@ -389,6 +408,31 @@ impl Checkpoint {
         s.scenario
             .validate()
             .map_err(|e| format!("invalid scenario: {e}"))?;
+        let adaptive = s.scenario.model.adaptive().is_some();
+        if adaptive && s.levels.len() != s.grains.len() {
+            return Err(format!(
+                "{} grain levels for {} grains of an adaptive-level run",
+                s.levels.len(),
+                s.grains.len()
+            ));
+        }
+        if !adaptive && !s.levels.is_empty() {
+            return Err("grain levels in a run without the adaptive level".into());
+        }
+        let levels = s
+            .levels
+            .iter()
+            .map(
+                |&[level, steps, pending]| match ModelLevel::ALL.get(level as usize) {
+                    Some(&level) => Ok(GrainLevel {
+                        level,
+                        steps,
+                        pending,
+                    }),
+                    None => Err(format!("grain level {level} (0, 1 or 2)")),
+                },
+            )
+            .collect::<Result<Vec<_>, String>>()?;
         let program = LoadingProgram {
             phases: s.scenario.loading.clone(),
             current: s.program.current,
@@ -412,6 +456,7 @@ impl Checkpoint {
             last_good_step: s.last_good_step,
             last_good: grains_of(&s.last_good),
             macro_rows: s.macro_rows,
+            levels,
         };
         Ok(Checkpoint {
             complete: s.complete,

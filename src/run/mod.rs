@@ -7,7 +7,7 @@ pub mod checkpoint;
 use crate::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
 use crate::boundary::walls::{box_size, box_walls};
 use crate::grain::Grain;
-use crate::integration::{Instability, World};
+use crate::integration::{Instability, StepTotals, World};
 use crate::output::mcap::{McapSettings, TrajectoryWriter};
 use crate::output::reference::CantorReference;
 use crate::output::{MacroWriter, Measures, write_grains_csv};
@@ -107,6 +107,20 @@ pub struct RunSummary {
     pub checkpoints_written: u64,
     /// The box at the end, `[x0, x1, y0, y1]`.
     pub final_box: [f64; 4],
+    /// Adaptive model only: steps taken while the highest level present was Rigid,
+    /// Volumetric, Full (each with its own time step), and the grain-steps at each level.
+    pub adaptive: Option<AdaptiveStats>,
+}
+
+/// How an adaptive-level run spent its steps (see [`RunSummary::adaptive`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AdaptiveStats {
+    /// Steps by the highest level present (which sets the time step).
+    pub steps_by_highest_level: [u64; 3],
+    /// Grain-steps at each level.
+    pub grain_steps_by_level: [u64; 3],
+    /// The time step for each highest level.
+    pub dt_by_highest_level: [f64; 3],
 }
 
 /// A phase with a stress target stops with [`RunError::TargetUnreachable`] once the packing
@@ -222,17 +236,31 @@ pub fn resume_run(
             std::fs::copy(&source, &macro_path).map_err(io_error(&macro_path))?;
         }
     }
-    let writer = MacroWriter::resume(&macro_path, c.runner.macro_rows).map_err(|e| {
-        RunError::Resume(format!(
-            "{}: cannot continue it from the checkpoint's {} rows: {e}",
-            macro_path.display(),
-            c.runner.macro_rows
-        ))
-    })?;
+    // A macro.csv of an sdem without the level columns is upgraded: every grain of a run
+    // without the adaptive level is at the scenario's level.
+    let fixed_levels = scenario.model.adaptive().is_none().then(|| {
+        let mut counts = [0; 3];
+        counts[scenario.model.level().index()] = c.grains.len() as u64;
+        counts
+    });
+    let writer = MacroWriter::resume_upgrading(&macro_path, c.runner.macro_rows, fixed_levels)
+        .map_err(|e| {
+            RunError::Resume(format!(
+                "{}: cannot continue it from the checkpoint's {} rows: {e}",
+                macro_path.display(),
+                c.runner.macro_rows
+            ))
+        })?;
     let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
     world.time = c.time;
     world.step = c.step;
-    world.totals = c.totals;
+    world.totals = StepTotals {
+        level_counts: world.totals.level_counts,
+        ..c.totals
+    };
+    if scenario.model.adaptive().is_some() {
+        world.set_levels(&c.runner.levels);
+    }
     run_loop(
         scenario,
         world,
@@ -251,6 +279,10 @@ fn snapshot(
     complete: bool,
     options: &RunOptions,
 ) -> Checkpoint {
+    let mut runner = runner.clone();
+    if scenario.model.adaptive().is_some() {
+        runner.levels = world.levels().to_vec();
+    }
     Checkpoint {
         scenario: scenario.clone(),
         complete,
@@ -262,7 +294,7 @@ fn snapshot(
         walls: world.walls.clone(),
         totals: world.totals,
         program: program.clone(),
-        runner: runner.clone(),
+        runner,
     }
 }
 
@@ -311,6 +343,11 @@ fn run_loop(
     let every = scenario.output.every;
     let mut last_progress = Instant::now();
     let mut last_row = Measures::of(&world, "start", 0.0, mean_diameter);
+    // Counted over this process's steps only (a resumed run reports its continued part).
+    let mut adaptive_stats = world.params.adaptive.map(|a| AdaptiveStats {
+        dt_by_highest_level: a.dt,
+        ..Default::default()
+    });
     // Incompressible grains keep their area pi R^2: their total is the area they need.
     let conserved_area = scenario
         .material
@@ -349,6 +386,7 @@ fn run_loop(
             Ok(state_file.display().to_string())
         };
         let box_before = box_corners(&world.walls);
+        let highest_before = highest_level(&world.totals.level_counts);
         if let Err(instability) = world.step() {
             let note = match program.phase().and_then(stress_target) {
                 Some(target) => format!(
@@ -377,6 +415,16 @@ fn run_loop(
                 last_good_step: r.last_good_step,
                 state_file,
             });
+        }
+        if let Some(stats) = adaptive_stats.as_mut() {
+            stats.steps_by_highest_level[highest_before] += 1;
+            for (sum, count) in stats
+                .grain_steps_by_level
+                .iter_mut()
+                .zip(&world.totals.level_counts)
+            {
+                *sum += count;
+            }
         }
         if program.affine() {
             let (lo, hi) = box_before;
@@ -535,6 +583,7 @@ fn run_loop(
         max_loaded_inertial_number: r.max_loaded_inertial_number,
         neighbor_builds: world.neighbors.builds,
         mcap_seconds,
+        adaptive: adaptive_stats,
         checkpoints_written,
         final_box: {
             use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
@@ -630,6 +679,11 @@ fn stalled(world: &World, state: &LoadState, conserved_area: Option<f64>) -> Opt
         ));
     }
     None
+}
+
+/// Index of the highest level with grains in it (0 when none).
+fn highest_level(counts: &[u64; 3]) -> usize {
+    (0..3).rev().find(|&k| counts[k] > 0).unwrap_or(0)
 }
 
 fn program_phases(scenario: &Scenario) -> Vec<&'static str> {
@@ -834,6 +888,31 @@ fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::R
         writeln!(f, "eq69_rms_relative_error = {rms:.4}")?;
         writeln!(f, "eq69_points = {n}")?;
     }
+    if let Some(a) = &s.adaptive {
+        let total: u64 = a.grain_steps_by_level.iter().sum();
+        for (k, name) in ["rigid", "volumetric", "full"].iter().enumerate() {
+            writeln!(
+                f,
+                "adaptive_steps_highest_{name} = {}",
+                a.steps_by_highest_level[k]
+            )?;
+            writeln!(
+                f,
+                "adaptive_dt_highest_{name} = {:.6e}",
+                a.dt_by_highest_level[k]
+            )?;
+            writeln!(
+                f,
+                "adaptive_grain_step_fraction_{name} = {:.4}",
+                a.grain_steps_by_level[k] as f64 / total.max(1) as f64
+            )?;
+        }
+    }
+    writeln!(
+        f,
+        "final_grains_rigid_volumetric_full = {},{},{}",
+        s.last.levels[0], s.last.levels[1], s.last.levels[2]
+    )?;
     Ok(())
 }
 

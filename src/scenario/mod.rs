@@ -12,9 +12,9 @@
 use crate::boundary::loading::{Phase, StopWhen, StrainRate};
 use crate::contact::SecantLaw;
 use crate::grain::Grain;
-use crate::grain::{Material, ModelLevel};
+use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
-use crate::integration::parameters::critical_time_step;
+use crate::integration::parameters::{Adaptive, critical_time_step};
 use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
 use crate::sample::{MAX_COUNT, RadiusDistribution, SampleError, SampleSpec};
 use serde::{Deserialize, Serialize};
@@ -36,7 +36,7 @@ pub struct Scenario {
     pub sample: SampleSettings,
     pub material: Material,
     #[serde(default)]
-    pub model: ModelLevel,
+    pub model: Model,
     #[serde(default)]
     pub contact: ContactSettings,
     #[serde(default)]
@@ -232,6 +232,113 @@ impl SampleSettings {
             ));
         }
         Ok(())
+    }
+}
+
+/// The model level of the grains (SPEC §1): one for all, or adaptive per grain (issue #6).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum Model {
+    /// Level 0: rigid discs (x, y, theta).
+    Rigid,
+    /// Level 1: + one volumetric strain (eps1 = eps2, alpha frozen).
+    Volumetric,
+    /// Level 3: all six degrees of freedom.
+    #[default]
+    Full,
+    /// Each grain moves between the three by its contact stress (see
+    /// [`crate::grain::adaptive`]); every field is optional, the defaults are those of
+    /// [`AdaptiveSettings::default`]. `Adaptive()` takes them all.
+    Adaptive {
+        #[serde(default = "adaptive_default::volumetric_up")]
+        volumetric_up: f64,
+        #[serde(default = "adaptive_default::volumetric_down")]
+        volumetric_down: f64,
+        #[serde(default = "adaptive_default::full_up")]
+        full_up: f64,
+        #[serde(default = "adaptive_default::full_down")]
+        full_down: f64,
+        #[serde(default = "adaptive_default::confirm")]
+        confirm: u32,
+        #[serde(default = "adaptive_default::dwell")]
+        dwell: u32,
+    },
+}
+
+mod adaptive_default {
+    use crate::grain::AdaptiveSettings;
+    pub fn volumetric_up() -> f64 {
+        AdaptiveSettings::default().volumetric_up
+    }
+    pub fn volumetric_down() -> f64 {
+        AdaptiveSettings::default().volumetric_down
+    }
+    pub fn full_up() -> f64 {
+        AdaptiveSettings::default().full_up
+    }
+    pub fn full_down() -> f64 {
+        AdaptiveSettings::default().full_down
+    }
+    pub fn confirm() -> u32 {
+        AdaptiveSettings::default().confirm
+    }
+    pub fn dwell() -> u32 {
+        AdaptiveSettings::default().dwell
+    }
+}
+
+impl Model {
+    /// The adaptive model with these thresholds.
+    pub fn adaptive_with(s: AdaptiveSettings) -> Self {
+        Model::Adaptive {
+            volumetric_up: s.volumetric_up,
+            volumetric_down: s.volumetric_down,
+            full_up: s.full_up,
+            full_down: s.full_down,
+            confirm: s.confirm,
+            dwell: s.dwell,
+        }
+    }
+
+    /// The thresholds, for the adaptive model.
+    pub fn adaptive(&self) -> Option<AdaptiveSettings> {
+        match *self {
+            Model::Adaptive {
+                volumetric_up,
+                volumetric_down,
+                full_up,
+                full_down,
+                confirm,
+                dwell,
+            } => Some(AdaptiveSettings {
+                volumetric_up,
+                volumetric_down,
+                full_up,
+                full_down,
+                confirm,
+                dwell,
+            }),
+            _ => None,
+        }
+    }
+
+    /// The level of every grain; for the adaptive model, the highest one a grain can reach.
+    pub fn level(&self) -> ModelLevel {
+        match self {
+            Model::Rigid => ModelLevel::Rigid,
+            Model::Volumetric => ModelLevel::Volumetric,
+            Model::Full | Model::Adaptive { .. } => ModelLevel::Full,
+        }
+    }
+}
+
+impl From<ModelLevel> for Model {
+    fn from(level: ModelLevel) -> Self {
+        match level {
+            ModelLevel::Rigid => Model::Rigid,
+            ModelLevel::Volumetric => Model::Volumetric,
+            ModelLevel::Full => Model::Full,
+        }
     }
 }
 
@@ -525,6 +632,11 @@ impl Scenario {
                 m.bulk_modulus() / m.young
             ));
         }
+        if let Some(a) = self.model.adaptive() {
+            a.check().map_err(|(field, value, allowed)| {
+                invalid(&format!("model.Adaptive.{field}"), num(value), allowed)
+            })?;
+        }
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
@@ -722,7 +834,17 @@ impl Scenario {
             &self.material,
             &self.secant_law(),
             self.smallest_radius(),
-            self.model,
+            self.model.level(),
+        )
+    }
+
+    /// The critical time step while every grain is rigid (the adaptive model's largest step).
+    pub fn rigid_critical_time_step(&self) -> f64 {
+        critical_time_step(
+            &self.material,
+            &self.secant_law(),
+            self.smallest_radius(),
+            ModelLevel::Rigid,
         )
     }
 
@@ -756,9 +878,23 @@ impl Scenario {
 
     /// The engine parameters this scenario asks for.
     pub fn parameters(&self) -> Parameters {
+        let adaptive = self.model.adaptive().map(|settings| match self.time_step {
+            TimeStep::FractionOfCritical(f) => Adaptive::fraction_of_critical(
+                settings,
+                f,
+                &self.material,
+                &self.secant_law(),
+                self.smallest_radius(),
+            ),
+            TimeStep::Fixed(dt) => Adaptive {
+                settings,
+                dt: [dt; 3],
+            },
+        });
         Parameters {
             material: self.material,
-            level: self.model,
+            level: self.model.level(),
+            adaptive,
             law: self.secant_law(),
             resolution_deg: self.contact.resolution_deg,
             contact_damping: self.contact.damping,
