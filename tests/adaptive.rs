@@ -489,7 +489,7 @@ fn a_run_without_level_columns_resumes_with_them() {
     // and the result is the uninterrupted run.
     let mut scenario = scenario();
     scenario.model = Model::Full;
-    scenario.sample.count = 200;
+    scenario.sample.count = Some(200);
     scenario.sample.box_width = 0.45;
     scenario.sample.box_height = 0.45;
     scenario.validate().unwrap();
