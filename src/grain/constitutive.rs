@@ -35,13 +35,19 @@ impl Material {
         self.poisson >= 0.5
     }
 
-    /// Stiffness of one principal-strain mode, `d sigma_1 / d eps_1 = mu + kappa` (mu alone when
-    /// incompressible: the volume is then enforced by the correction, not by a stiffness).
+    /// Stiffness of the stiffest principal-strain mode: the largest eigenvalue of
+    /// `d(sigma_1, sigma_2) / d(eps_1, eps_2) = [[mu + kappa, kappa - mu], [kappa - mu, mu + kappa]]`,
+    /// i.e. `2 kappa` (volumetric mode, eps_1 = eps_2) or `2 mu` (deviatoric mode,
+    /// eps_1 = -eps_2); `2 mu` when incompressible, where the volume is enforced by the
+    /// correction, not by a stiffness. (The diagonal `mu + kappa` alone underestimates it by up
+    /// to sqrt(2) as nu -> 0.5: the stability map found compressible runs unstable at 0.8 of
+    /// that estimate, docs/speed_accuracy.md.)
     pub fn deformation_stiffness(&self) -> f64 {
+        let deviatoric = 2.0 * self.shear_modulus();
         if self.is_incompressible() {
-            self.shear_modulus()
+            deviatoric
         } else {
-            self.shear_modulus() + self.bulk_modulus()
+            deviatoric.max(2.0 * self.bulk_modulus())
         }
     }
 }
@@ -101,6 +107,40 @@ pub fn incompressible_strains(eps1: f64, eps2: f64, lost_fraction: f64) -> (f64,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn deformation_stiffness_is_the_largest_eigenvalue_of_the_stress_jacobian() {
+        // Expectation: the stiffest strain mode (which sets the critical time step) is the
+        // largest eigenvalue of d(sigma_1, sigma_2)/d(eps_1, eps_2), here by central differences
+        // of `principal_stress` at rest (for nu = 0.5 the volume is held by the correction, so
+        // only the deviatoric response counts, as in `principal_stress`).
+        for poisson in [0.0, 0.3, 0.45, 0.49, 0.499, 0.5] {
+            let m = Material {
+                young: 2.0,
+                poisson,
+                density: 1.0,
+            };
+            let h = 1e-7;
+            let d = |e1: f64, e2: f64| principal_stress(&m, e1, e2, 0.0);
+            let column = |k: usize| {
+                let (p, q) = if k == 0 {
+                    (d(h, 0.0), d(-h, 0.0))
+                } else {
+                    (d(0.0, h), d(0.0, -h))
+                };
+                [(p.0 - q.0) / (2.0 * h), (p.1 - q.1) / (2.0 * h)]
+            };
+            let (c0, c1) = (column(0), column(1));
+            let (a, b, c, dd) = (c0[0], c1[0], c0[1], c1[1]);
+            let mean = 0.5 * (a + dd);
+            let largest = mean + (0.25 * (a - dd) * (a - dd) + b * c).sqrt();
+            let stiffness = m.deformation_stiffness();
+            assert!(
+                (stiffness - largest).abs() < 1e-6 * largest,
+                "nu = {poisson}: {stiffness} vs {largest}"
+            );
+        }
+    }
 
     #[test]
     fn incompressible_correction_restores_the_reference_area() {

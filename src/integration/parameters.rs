@@ -77,7 +77,8 @@ impl Adaptive {
 /// Angular frequencies of the stiffest modes of a grain of radius `radius` (SPEC §9).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StiffestModes {
-    /// Principal-strain mode: `(2/R) sqrt((mu + kappa)/rho)` (mu alone when incompressible).
+    /// Principal-strain mode: `(2/R) sqrt(K/rho)`, K the stiffest strain mode of
+    /// [`Material::deformation_stiffness`] (`max(2 mu, 2 kappa)`; `2 mu` when incompressible).
     pub deformation: f64,
     /// Contact mode at the initial contact stiffness `k = E/a` in a dense packing:
     /// `sqrt(4 * coupling * 2k/m)`. Between two grains the mode is `sqrt(2k/m)` (m_eff = m/2);
@@ -110,6 +111,15 @@ pub fn stiffest_modes(
 }
 
 /// Critical time step of symplectic Euler, `2 / omega_max`, for the smallest grain.
+///
+/// For incompressible grains `omega_max` is the larger of the two modes: the contact mode's
+/// coupling factor already counts the strain DoF's inertia, and the volume is held by the
+/// correction, not by a stiffness. A compressible grain's volumetric stiffness `2 kappa` acts on
+/// the same strain DoF that the contacts push, so the two stiffnesses add:
+/// `omega_max^2 = omega_c^2 + omega_eps^2`. The stability map (tools/stability_map.py,
+/// docs/speed_accuracy.md) found compressible runs (nu = 0.3 to 0.499) unstable at 1.0, and for
+/// nu >= 0.45 at 0.8, of the larger-mode estimate, at the point where contacts and volumetric
+/// strain couple; the summed estimate places every observed limit between 1.0 and 1.25 of it.
 pub fn critical_time_step(
     material: &Material,
     law: &SecantLaw,
@@ -117,5 +127,10 @@ pub fn critical_time_step(
     level: ModelLevel,
 ) -> f64 {
     let modes = stiffest_modes(material, law, min_radius, level);
-    2.0 / modes.deformation.max(modes.contact)
+    let omega_max = if material.is_incompressible() || level == ModelLevel::Rigid {
+        modes.deformation.max(modes.contact)
+    } else {
+        (modes.deformation * modes.deformation + modes.contact * modes.contact).sqrt()
+    };
+    2.0 / omega_max
 }
