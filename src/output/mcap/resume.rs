@@ -113,7 +113,9 @@ pub fn scan_log(
             .with_skip_start_magic(true)
             .with_validate_chunk_crcs(true)
             .with_prevalidate_chunk_crcs(true)
-            .with_record_length_limit(size.min(1 << 32) as usize),
+            // Chunks decompress to far more than the file holds when it is small; a corrupt
+            // length must not make the reader reserve absurd amounts of memory either.
+            .with_record_length_limit(size.saturating_mul(64).clamp(1 << 26, 1 << 32) as usize),
     );
     let mut scan = LogScan::default();
     let mut schemas: BTreeMap<u16, (String, String, Vec<u8>)> = BTreeMap::new();
