@@ -69,7 +69,9 @@ enum Command {
         /// No progress lines.
         #[arg(long)]
         quiet: bool,
-        /// Write the continued part of the trajectory as a new MCAP log.
+        /// Continue the MCAP log FILE (the interrupted run's, finished or left unfinished by a
+        /// kill): it ends up holding exactly the frames of the uninterrupted run. A FILE that
+        /// does not exist gets the continued part only.
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
         /// Checkpoint interval in steps (default: the interrupted run's).

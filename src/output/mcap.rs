@@ -39,9 +39,12 @@ use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufWriter, Read, Seek, SeekFrom};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+
+mod resume;
+pub use resume::{ContinueFrom, Continued, LogScan, scan_log};
 
 /// Version of the channel layout below; stored in the `sdem.run` metadata.
 /// 2: `/macro` gained `grains_rigid`, `grains_volumetric`, `grains_full` (adaptive level).
@@ -174,6 +177,10 @@ pub enum WriteError {
         path: String,
         error: mcap::McapError,
     },
+    /// An existing log cannot be continued from a checkpoint (see
+    /// [`TrajectoryWriter::continue_log`]).
+    #[error("{path}: cannot continue this trajectory log: {reason}")]
+    Continue { path: String, reason: String },
 }
 
 impl From<WriteError> for std::io::Error {
@@ -836,6 +843,11 @@ impl McapSettings {
 pub struct TrajectoryWriter {
     path: String,
     inner: mcap::Writer<BufWriter<File>>,
+    /// The same open file, to fsync it.
+    file: File,
+    /// A continued log is written to a temporary file that replaces this one at the first
+    /// [`TrajectoryWriter::sync`] or at [`TrajectoryWriter::finish`].
+    replaces: Option<PathBuf>,
     grains: u16,
     contacts: u16,
     walls: u16,
@@ -871,6 +883,16 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         world: &World,
     ) -> Result<Self, WriteError> {
+        Ok(Self::create_with_preamble(settings, scenario, world)?.0)
+    }
+
+    /// [`TrajectoryWriter::create`], also returning the `sdem.run` metadata and the scenario
+    /// attachment it wrote.
+    fn create_with_preamble(
+        settings: &McapSettings,
+        scenario: &Scenario,
+        world: &World,
+    ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
         let path = settings.path.display().to_string();
         if let Some(dir) = settings.path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|error| WriteError::Io {
@@ -879,6 +901,10 @@ impl TrajectoryWriter {
             })?;
         }
         let file = File::create(&settings.path).map_err(|error| WriteError::Io {
+            path: path.clone(),
+            error,
+        })?;
+        let handle = file.try_clone().map_err(|error| WriteError::Io {
             path: path.clone(),
             error,
         })?;
@@ -982,12 +1008,14 @@ impl TrajectoryWriter {
         inner
             .write_metadata(&records::Metadata {
                 name: "sdem.run".into(),
-                metadata: run,
+                metadata: run.clone(),
             })
             .map_err(mcap_err)?;
-        Ok(Self {
+        let writer = Self {
             path,
             inner,
+            file: handle,
+            replaces: None,
             grains,
             contacts,
             walls,
@@ -999,7 +1027,64 @@ impl TrajectoryWriter {
             frames: 0,
             buf: Vec::new(),
             text: String::new(),
-        })
+        };
+        Ok((writer, run, scenario_text))
+    }
+
+    /// (id, topic, schema name, schema encoding, schema, message encoding) of the channels.
+    #[allow(clippy::type_complexity)]
+    fn channel_table(
+        &self,
+    ) -> [(
+        u16,
+        &'static str,
+        &'static str,
+        &'static str,
+        &'static str,
+        &'static str,
+    ); 5] {
+        [
+            (
+                self.grains,
+                TOPIC_GRAINS,
+                SCHEMA_GRAINS,
+                "ros2msg",
+                GRAINS_MSG,
+                "cdr",
+            ),
+            (
+                self.contacts,
+                TOPIC_CONTACTS,
+                SCHEMA_CONTACTS,
+                "ros2msg",
+                CONTACTS_MSG,
+                "cdr",
+            ),
+            (
+                self.walls,
+                TOPIC_WALLS,
+                SCHEMA_WALLS,
+                "ros2msg",
+                WALLS_MSG,
+                "cdr",
+            ),
+            (
+                self.macro_row,
+                TOPIC_MACRO,
+                SCHEMA_MACRO,
+                "ros2msg",
+                MACRO_MSG,
+                "cdr",
+            ),
+            (
+                self.scene,
+                TOPIC_SCENE,
+                SCHEMA_SCENE,
+                "jsonschema",
+                SCENE_SCHEMA,
+                "json",
+            ),
+        ]
     }
 
     fn mcap_error(&self, error: mcap::McapError) -> WriteError {
@@ -1057,7 +1142,34 @@ impl TrajectoryWriter {
         Ok(())
     }
 
-    /// Writes the `sdem.summary` metadata and the summary section, and closes the file.
+    fn io_error(&self, error: std::io::Error) -> WriteError {
+        WriteError::Io {
+            path: self.path.clone(),
+            error,
+        }
+    }
+
+    /// Makes everything logged so far durable: finishes the current chunk, flushes and fsyncs
+    /// the file. The run calls it before each checkpoint, so that a checkpoint never counts a
+    /// frame that a killed process left in memory. A continued log (see
+    /// [`TrajectoryWriter::continue_log`]) then replaces the log it continues.
+    pub fn sync(&mut self) -> Result<(), WriteError> {
+        self.inner.flush().map_err(|e| self.mcap_error(e))?;
+        self.file.sync_data().map_err(|e| self.io_error(e))?;
+        self.replace_original()
+    }
+
+    /// Renames the temporary file of a continued log over the log it continues (once).
+    fn replace_original(&mut self) -> Result<(), WriteError> {
+        if let Some(to) = self.replaces.take() {
+            rename_durably(&self.path, &to)?;
+            self.path = to.display().to_string();
+        }
+        Ok(())
+    }
+
+    /// Writes the `sdem.summary` metadata and the summary section, and closes the file (a
+    /// continued log then replaces the log it continues).
     pub fn finish(mut self, summary: BTreeMap<String, String>) -> Result<(), WriteError> {
         let mut summary = summary;
         summary.insert("frames".into(), self.frames.to_string());
@@ -1068,8 +1180,32 @@ impl TrajectoryWriter {
             })
             .map_err(|e| self.mcap_error(e))?;
         self.inner.finish().map_err(|e| self.mcap_error(e))?;
+        if let Some(to) = self.replaces.take() {
+            let io = |error| WriteError::Io {
+                path: self.path.clone(),
+                error,
+            };
+            let mut out = self.inner.into_inner();
+            out.flush().map_err(io)?;
+            self.file.sync_data().map_err(io)?;
+            rename_durably(&self.path, &to)?;
+        }
         Ok(())
     }
+}
+
+/// Renames `from` to `to` and fsyncs the folder (where the platform allows opening one).
+fn rename_durably(from: &str, to: &Path) -> Result<(), WriteError> {
+    std::fs::rename(from, to).map_err(|error| WriteError::Io {
+        path: format!("{from} -> {}", to.display()),
+        error,
+    })?;
+    if let Some(dir) = to.parent().filter(|d| !d.as_os_str().is_empty())
+        && let Ok(d) = File::open(dir)
+    {
+        d.sync_all().ok();
+    }
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ use crate::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
 use crate::boundary::walls::{box_size, box_walls};
 use crate::grain::Grain;
 use crate::integration::{Instability, StepTotals, World};
-use crate::output::mcap::{McapSettings, TrajectoryWriter};
+use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter};
 use crate::output::reference::CantorReference;
 use crate::output::{MacroWriter, Measures, write_grains_csv};
 use crate::sample::{self, SampleError};
@@ -203,13 +203,19 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
         last_good: world.grains.clone(),
         ..Default::default()
     };
-    run_loop(scenario, world, program, runner, writer, options)
+    run_loop(scenario, world, program, runner, writer, options, None)
 }
 
 /// Continues the run of a checkpoint (see [`checkpoint`]) in `options.out_dir`: `macro.csv`
 /// there is cut back to the rows written up to the checkpoint's step, then appended to. When
 /// the output directory has no `macro.csv` but `checkpoint_path`'s directory has one, it is
-/// copied first. An MCAP log (if asked for) holds the continued part only.
+/// copied first.
+///
+/// An MCAP log (`options.mcap`) is continued when its file exists: the frames written up to the
+/// checkpoint are read back from it (finished or left unfinished by a killed process) and the
+/// run goes on after them in a temporary file that replaces it (see
+/// [`TrajectoryWriter::continue_log`]), so that it ends up holding exactly the frames of the
+/// uninterrupted run. When the file does not exist, a new log holds the continued part only.
 pub fn resume_run(
     checkpoint: &Checkpoint,
     checkpoint_path: &Path,
@@ -268,6 +274,10 @@ pub fn resume_run(
         c.runner.clone(),
         writer,
         options,
+        Some(ContinueFrom {
+            step: c.step,
+            frames: c.runner.macro_rows,
+        }),
     )
 }
 
@@ -306,13 +316,11 @@ fn run_loop(
     mut r: RunnerState,
     mut writer: MacroWriter,
     options: &RunOptions,
+    continue_from: Option<ContinueFrom>,
 ) -> Result<RunSummary, RunError> {
     let out = &options.out_dir;
     let mut log = match &options.mcap {
-        Some(settings) => Some(
-            TrajectoryWriter::create(settings, scenario, &world)
-                .map_err(|e| io_error(&settings.path)(e.into()))?,
-        ),
+        Some(settings) => Some(open_log(settings, scenario, &world, continue_from)?),
         None => None,
     };
     let log_error = |e: crate::output::mcap::WriteError| {
@@ -515,6 +523,11 @@ fn run_loop(
                     .checkpoint_seconds
                     .is_some_and(|s| last_checkpoint.elapsed().as_secs_f64() >= s))
         {
+            if let Some(log) = log.as_mut() {
+                let t = Instant::now();
+                log.sync().map_err(log_error)?;
+                mcap_seconds += t.elapsed().as_secs_f64();
+            }
             write_checkpoint(snapshot(scenario, &world, &program, &r, false, options))?;
             last_checkpoint = Instant::now();
         }
@@ -558,6 +571,11 @@ fn run_loop(
     }
     progress.finish();
     if checkpoints_on {
+        if let Some(log) = log.as_mut() {
+            let t = Instant::now();
+            log.sync().map_err(log_error)?;
+            mcap_seconds += t.elapsed().as_secs_f64();
+        }
         write_checkpoint(snapshot(scenario, &world, &program, &r, true, options))?;
     }
     let grains_path = out.join("grains.csv");
@@ -604,6 +622,48 @@ fn run_loop(
     let summary_path = out.join("summary.txt");
     write_summary(&summary_path, scenario, &summary).map_err(io_error(&summary_path))?;
     Ok(summary)
+}
+
+/// Opens the MCAP log of a run: a new one, or for a resumed run (`continue_from`) the existing
+/// log continued from the checkpoint (a new one holding the continued part when the file does
+/// not exist; both cases are reported on stderr).
+fn open_log(
+    settings: &McapSettings,
+    scenario: &Scenario,
+    world: &World,
+    continue_from: Option<ContinueFrom>,
+) -> Result<TrajectoryWriter, RunError> {
+    let path = &settings.path;
+    let created = |e: crate::output::mcap::WriteError| io_error(path)(e.into());
+    let Some(from) = continue_from else {
+        return TrajectoryWriter::create(settings, scenario, world).map_err(created);
+    };
+    if !path.exists() {
+        eprintln!(
+            "sdem: {} does not exist: a new MCAP log holds the continued part only (frames \
+             after step {})",
+            path.display(),
+            from.step
+        );
+        return TrajectoryWriter::create(settings, scenario, world).map_err(created);
+    }
+    let (log, c) = TrajectoryWriter::continue_log(settings, scenario, world, from)
+        .map_err(|e| RunError::Resume(e.to_string()))?;
+    eprintln!(
+        "sdem: continuing the MCAP log {}: {} frames up to step {} kept, {} after it dropped \
+         ({}); written to {} until it replaces the log",
+        path.display(),
+        c.kept_frames,
+        from.step,
+        c.dropped_frames,
+        if c.was_finished {
+            "the log was finished"
+        } else {
+            "the log was unfinished"
+        },
+        c.temporary.display()
+    );
+    Ok(log)
 }
 
 /// The `sdem.summary` metadata of a finished run (no wall-clock time: logs are deterministic).
