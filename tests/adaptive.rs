@@ -144,8 +144,10 @@ fn a_grain_loaded_across_the_threshold_and_back_changes_level_once_each_way() {
 #[test]
 fn the_time_step_follows_the_highest_level_present() {
     // Expectation: dt = 0.4 x the rigid critical step while every grain is rigid,
-    // 0.4 x the full one while one grain deforms; the rigid one is sqrt(5) larger here (the
-    // contact mode sets both).
+    // 0.4 x the full one while one grain deforms. The rigid one is larger by sqrt(5) (the
+    // contact mode's coupling) and more for these compressible grains (nu = 0.3), whose
+    // volumetric strain mode adds to the deformable grain's contact mode:
+    // omega_full^2 = 5 omega_rigid^2 + (2/R)^2 2 kappa / rho.
     let settings = AdaptiveSettings {
         volumetric_up: 5e-4,
         volumetric_down: 1e-4,
@@ -158,7 +160,12 @@ fn the_time_step_follows_the_highest_level_present() {
     let m = p.material;
     let rigid = 0.4 * critical_time_step(&m, &p.law, 0.5, ModelLevel::Rigid);
     let full = 0.4 * critical_time_step(&m, &p.law, 0.5, ModelLevel::Full);
-    assert!((rigid / full - 5f64.sqrt()).abs() < 1e-12);
+    let omega_rigid = 2.0 / (rigid / 0.4);
+    let kappa = m.young / (3.0 - 6.0 * m.poisson);
+    let omega_strain_squared = (2.0f64 / 0.5).powi(2) * 2.0 * kappa / m.density;
+    let expected = (5.0 + omega_strain_squared / (omega_rigid * omega_rigid)).sqrt();
+    assert!((rigid / full - expected).abs() < 1e-12 * expected);
+    assert!(rigid / full > 5f64.sqrt());
     let world = World::new(p, vec![Grain::at_rest(DVec2::ZERO, 0.5)], Vec::new());
     assert_eq!(world.params.dt, rigid);
     let (world, trace) = oscillating_squeeze(p);
