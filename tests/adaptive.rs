@@ -2,6 +2,8 @@
 //! model, the time step it picks, determinism and checkpoints.
 
 use glam::DVec2;
+mod common;
+use common::grain_bits;
 use sdem::boundary::walls::{Wall, box_walls};
 use sdem::grain::adaptive::stress_invariants;
 use sdem::grain::{AdaptiveSettings, Grain, GrainLevel, Material, ModelLevel};
@@ -347,41 +349,11 @@ fn scenario() -> Scenario {
 }
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdem-adaptive-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::temp_dir("adaptive", name)
 }
 
 fn options(out: &Path, every: u64) -> RunOptions {
-    RunOptions {
-        out_dir: out.to_path_buf(),
-        checkpoint_every: every,
-        ..Default::default()
-    }
-}
-
-fn grain_bits(g: &[Grain]) -> Vec<[u64; 13]> {
-    g.iter()
-        .map(|g| {
-            [
-                g.radius,
-                g.center.x,
-                g.center.y,
-                g.velocity.x,
-                g.velocity.y,
-                g.theta,
-                g.omega,
-                g.eps1,
-                g.eps1_rate,
-                g.eps2,
-                g.eps2_rate,
-                g.alpha,
-                g.alpha_rate,
-            ]
-            .map(f64::to_bits)
-        })
-        .collect()
+    common::checkpointed(out, every)
 }
 
 fn assert_same_run(a_dir: &Path, b_dir: &Path) {

@@ -4,7 +4,6 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sdem::grain::Grain;
 use sdem::run::checkpoint::{Checkpoint, CheckpointError, FORMAT_VERSION, RunnerState};
 use sdem::run::{RunError, RunOptions, build_world, resume_run, run_scenario};
 use sdem::scenario::Scenario;
@@ -12,63 +11,19 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// ~6000 steps: a fast isotropic compaction through jamming, then a relaxation phase.
-const SMALL: &str = r#"
-Scenario(
-    name: "ckpt_small",
-    sample: (count: 200, box_width: 0.45, box_height: 0.45,
-             radii: Gaussian(mean: 0.012, std_dev: 0.0024, min: 0.008, max: 0.016)),
-    material: (young: 1.0, poisson: 0.5, density: 1.0),
-    loading: [
-        Isotropic(rate: Constant(5e-2), until: PackingFraction(0.86)),
-        Relax(until: Steps(1000)),
-    ],
-    output: (every: 50),
-)
-"#;
+mod common;
+use common::{SMALL_COMPACTION as SMALL, grain_bits};
 
 fn scenario() -> Scenario {
-    let s = Scenario::parse(SMALL, "small.ron").unwrap();
-    s.validate().unwrap();
-    s
+    common::small_compaction()
 }
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdem-ckpt-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::temp_dir("ckpt", name)
 }
 
 fn options(out: &Path, every: u64) -> RunOptions {
-    RunOptions {
-        out_dir: out.to_path_buf(),
-        checkpoint_every: every,
-        ..Default::default()
-    }
-}
-
-fn grain_bits(g: &[Grain]) -> Vec<[u64; 13]> {
-    g.iter()
-        .map(|g| {
-            [
-                g.radius,
-                g.center.x,
-                g.center.y,
-                g.velocity.x,
-                g.velocity.y,
-                g.theta,
-                g.omega,
-                g.eps1,
-                g.eps1_rate,
-                g.eps2,
-                g.eps2_rate,
-                g.alpha,
-                g.alpha_rate,
-            ]
-            .map(f64::to_bits)
-        })
-        .collect()
+    common::checkpointed(out, every)
 }
 
 /// The final state of a finished run, from its last (complete) checkpoint.

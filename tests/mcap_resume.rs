@@ -14,40 +14,21 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// ~6000 steps, a row (and a frame) every 50.
-const SMALL: &str = r#"
-Scenario(
-    name: "mcap_resume",
-    sample: (count: 200, box_width: 0.45, box_height: 0.45,
-             radii: Gaussian(mean: 0.012, std_dev: 0.0024, min: 0.008, max: 0.016)),
-    material: (young: 1.0, poisson: 0.5, density: 1.0),
-    loading: [
-        Isotropic(rate: Constant(5e-2), until: PackingFraction(0.86)),
-        Relax(until: Steps(1000)),
-    ],
-    output: (every: 50),
-)
-"#;
+mod common;
+use common::SMALL_COMPACTION as SMALL;
 
 fn scenario() -> Scenario {
-    let s = Scenario::parse(SMALL, "small.ron").unwrap();
-    s.validate().unwrap();
-    s
+    common::small_compaction()
 }
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdem-mcapres-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::temp_dir("mcapres", name)
 }
 
 fn options(out: &Path, every: u64, log: &Path) -> RunOptions {
     RunOptions {
-        out_dir: out.to_path_buf(),
-        checkpoint_every: every,
         mcap: Some(McapSettings::new(log)),
-        ..Default::default()
+        ..common::checkpointed(out, every)
     }
 }
 

@@ -825,6 +825,30 @@ mod tests {
         points
     }
 
+    /// A random pair of ellipses in any overlap, from deep to barely touching: i of radius 1 at
+    /// the origin, j of radius `rj` in [0.1, 1.6] (returned) around it; strains up to 20%.
+    fn random_pair(next: &mut impl FnMut() -> f64) -> (GrainShape, GrainShape, f64) {
+        let i = GrainShape::new(
+            DVec2::ZERO,
+            1.0,
+            6.0 * next(),
+            0.4 * next() - 0.2,
+            0.4 * next() - 0.2,
+            6.0 * next(),
+        );
+        let rj = 0.1 + 1.5 * next();
+        let direction = DVec2::from_angle(6.3 * next());
+        let j = GrainShape::new(
+            direction * (1.0 + rj) * (0.75 + 0.3 * next()),
+            rj,
+            6.0 * next(),
+            0.3 * next() - 0.15,
+            0.3 * next() - 0.15,
+            6.0 * next(),
+        );
+        (i, j, rj)
+    }
+
     #[test]
     fn hints_never_change_the_contact() {
         // Expectation: a hint only chooses where the exact search starts, so any hint (last
@@ -836,23 +860,7 @@ mod tests {
         let mut next = || crate::sample::unit_random(&mut rng);
         let mut compared = 0;
         for _ in 0..300 {
-            let i = GrainShape::new(
-                DVec2::ZERO,
-                1.0,
-                6.0 * next(),
-                0.4 * next() - 0.2,
-                0.4 * next() - 0.2,
-                6.0 * next(),
-            );
-            let rj = 0.1 + 1.5 * next();
-            let j = GrainShape::new(
-                DVec2::from_angle(6.3 * next()) * (1.0 + rj) * (0.75 + 0.3 * next()),
-                rj,
-                6.0 * next(),
-                0.3 * next() - 0.15,
-                0.3 * next() - 0.15,
-                6.0 * next(),
-            );
+            let (i, j, _) = random_pair(&mut next);
             let mut exact_hint = PairHint::default();
             let cold = grain_grain_hinted(&table, &i, &j, &mut exact_hint);
             let shift = |h: ChainHint, d: i32| ChainHint {
@@ -899,24 +907,7 @@ mod tests {
         let mut next = || crate::sample::unit_random(&mut rng);
         let mut checked = 0;
         for _ in 0..400 {
-            let i = GrainShape::new(
-                DVec2::ZERO,
-                1.0,
-                6.0 * next(),
-                0.4 * next() - 0.2,
-                0.4 * next() - 0.2,
-                6.0 * next(),
-            );
-            let rj = 0.1 + 1.5 * next();
-            let dir = DVec2::from_angle(6.3 * next());
-            let j = GrainShape::new(
-                dir * (1.0 + rj) * (0.75 + 0.3 * next()),
-                rj,
-                6.0 * next(),
-                0.3 * next() - 0.15,
-                0.3 * next() - 0.15,
-                6.0 * next(),
-            );
+            let (i, j, rj) = random_pair(&mut next);
             let Overlap::Contact(c) = grain_grain(&table, &i, &j) else {
                 continue;
             };
