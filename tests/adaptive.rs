@@ -397,13 +397,10 @@ fn adaptive_runs_are_deterministic_and_resume_bitwise() {
     let mut dirs = Vec::new();
     for threads in [1, 2] {
         let dir = temp_dir(&format!("threads{threads}"));
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let summary = pool
-            .install(|| run_scenario(&scenario, &options(&dir, 1_000_000_000)))
-            .unwrap();
+        let summary = common::with_threads(threads, || {
+            run_scenario(&scenario, &options(&dir, 1_000_000_000))
+        })
+        .unwrap();
         let stats = summary.adaptive.expect("adaptive statistics");
         // Both time steps were used, and grains sat at every level at some point.
         assert!(stats.steps_by_highest_level[0] > 100, "{stats:?}");
@@ -447,12 +444,7 @@ fn adaptive_runs_are_deterministic_and_resume_bitwise() {
         let path = dir.join("checkpoint.bin");
         let c = Checkpoint::read(&path).unwrap();
         assert_eq!(c.runner.levels.len(), 600);
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        pool.install(|| resume_run(&c, &path, &options(&dir, 1_000_000_000)))
-            .unwrap();
+        common::with_threads(2, || resume_run(&c, &path, &options(&dir, 1_000_000_000))).unwrap();
         assert_same_run(&dirs[0], &dir);
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -422,12 +422,10 @@ fn one_and_two_threads_give_identical_outputs() {
     let mut dirs = Vec::new();
     for threads in [1, 2] {
         let dir = temp_dir(&format!("threads{threads}"));
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| run_scenario(&scenario, &options(&dir, 1_000_000_000)))
-            .unwrap();
+        common::with_threads(threads, || {
+            run_scenario(&scenario, &options(&dir, 1_000_000_000))
+        })
+        .unwrap();
         dirs.push(dir);
     }
     assert_same_run(&dirs[0], &dirs[1]);

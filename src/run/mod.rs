@@ -393,7 +393,8 @@ fn run_loop(
             }
             Ok(state_file.display().to_string())
         };
-        let box_before = box_corners(&world.walls);
+        // The box before the step, for an affine phase's remap of the grain centres.
+        let box_before = program.affine().then(|| box_corners(&world.walls));
         let highest_before = highest_level(&world.totals.level_counts);
         if let Err(instability) = world.step() {
             let note = match program.phase().and_then(stress_target) {
@@ -434,8 +435,7 @@ fn run_loop(
                 *sum += count;
             }
         }
-        if program.affine() {
-            let (lo, hi) = box_before;
+        if let Some((lo, hi)) = box_before {
             let (to_lo, to_hi) = box_corners(&world.walls);
             world.remap_affine(lo, hi, to_lo, to_hi);
         }

@@ -69,3 +69,12 @@ pub fn grain_bits(g: &[Grain]) -> Vec<[u64; 13]> {
         })
         .collect()
 }
+
+/// Runs `f` on a rayon pool of `threads` threads.
+pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
