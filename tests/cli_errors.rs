@@ -165,15 +165,26 @@ fn location(path: &Path, text: &str, token: &str) -> String {
 // Valid input
 
 #[test]
-fn shipped_scenario_checks_ok() {
-    let out = sdem(&["check", "scenarios/isotropic_A.ron"]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "status {:?}\nstderr:\n{stderr}",
-        out.status
-    );
-    assert!(String::from_utf8_lossy(&out.stdout).contains("valid"));
+fn every_shipped_scenario_checks_ok() {
+    let mut shipped: Vec<_> =
+        std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "ron"))
+            .collect();
+    shipped.sort();
+    assert!(shipped.len() >= 5, "scenarios/ holds {shipped:?}");
+    for path in shipped {
+        let out = sdem(&[Path::new("check"), &path]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success(),
+            "{}: status {:?}\nstderr:\n{stderr}",
+            path.display(),
+            out.status
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("valid"));
+    }
 }
 
 #[test]
