@@ -185,6 +185,14 @@ fn parse_region(text: &str) -> std::result::Result<Region, String> {
 }
 
 /// A checkpoint interval in seconds: a finite number > 0.
+/// "1 thread", "2 threads".
+fn thread_count(pool: &rayon::ThreadPool) -> String {
+    match pool.current_num_threads() {
+        1 => "1 thread".to_string(),
+        n => format!("{n} threads"),
+    }
+}
+
 fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(s) if s.is_finite() && s > 0.0 => Ok(s),
@@ -261,12 +269,12 @@ fn run(cli: Cli) -> Result<()> {
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
             let pool = thread_pool(threads)?;
             eprintln!(
-                "sdem: {} — {} grains, dt = {:.3e} ({:.2} x critical), {} threads, output in {}",
+                "sdem: {} — {} grains, dt = {:.3e} ({:.2} x critical), {}, output in {}",
                 parsed.name,
                 parsed.sample.grain_count(),
                 parsed.time_step_value(),
                 parsed.time_step_value() / parsed.critical_time_step(),
-                pool.current_num_threads(),
+                thread_count(&pool),
                 out_dir.display()
             );
             if let Some(a) = parsed.parameters().adaptive {
@@ -309,11 +317,11 @@ fn run(cli: Cli) -> Result<()> {
             });
             let pool = thread_pool(threads)?;
             eprintln!(
-                "sdem: resuming {} at step {} (t = {:.4e}), {} threads, output in {}",
+                "sdem: resuming {} at step {} (t = {:.4e}), {}, output in {}",
                 saved.scenario.name,
                 saved.step,
                 saved.time,
-                pool.current_num_threads(),
+                thread_count(&pool),
                 out_dir.display()
             );
             let terminal = std::io::stderr().is_terminal();

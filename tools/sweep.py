@@ -3,7 +3,7 @@
 
 usage: tools/sweep.py [--scenario scenarios/isotropic_A.ron] [--out out/sweep] [--phi-end 0.92]
                       [--seeds 1,2,3] [--jobs 2] [--sdem target/release/sdem] [--threads 1]
-                      [--eq69 PHI0,Z0] [--grid full|quick|first] [--adaptive off|on]
+                      [--eq69 PHI0,Z0] [--grid full|quick] [--adaptive off|on]
                       [--only LABEL,...]
 
 Each grid point changes the contour resolution dbeta, the time step (fraction of the critical
@@ -44,9 +44,6 @@ GRIDS = {
              (1.0, 0.8, "Full"), (1.0, 0.4, "Volumetric"), (1.0, 0.4, "Rigid"),
              (1.0, 0.4, "Adaptive()"), (1.0, 0.6, "Adaptive()"), (1.0, 0.8, "Adaptive()")],
     "quick": [(1.0, 0.4, "Full"), (4.0, 0.4, "Full")],
-    # the first sweep (one seed, sample A), kept to reproduce docs' first table
-    "first": [(0.5, 0.4, "Full"), (1.0, 0.4, "Full"), (2.0, 0.4, "Full"), (4.0, 0.4, "Full"),
-              (8.0, 0.4, "Full"), (1.0, 0.2, "Full"), (1.0, 0.8, "Full"), (1.0, 0.4, "Volumetric")],
 }
 
 
