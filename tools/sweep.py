@@ -30,7 +30,8 @@ seed-averaged curve p_c(phi) (linear interpolation on phi = 0.86, 0.865, ..., ph
     2020) with the paper's jamming point of the sample (--eq69, defaults by scenario name:
     A 0.833,4.20; B 0.858,4.22).
 It writes OUT/sweep.csv (one row per point), OUT/runs.csv (one row per run) and OUT/sweep.svg
-(error against CPU time, log-log, Pareto front marked, noise floor dashed). Runs that already
+(error against CPU time, log-log, Pareto front marked, noise floor dashed, the finest
+point's cost as a vertical line). Runs that already
 have a summary.txt are reused.
 """
 import argparse, csv, math, os, pathlib, re, statistics, subprocess, sys, time
@@ -96,9 +97,9 @@ def run_one(sdem, threads, scenario, run_dir):
     return proc.returncode, (lines[-1] if lines else ""), usage.ru_utime + usage.ru_stime
 
 
-def svg_chart(points, noise, title, path):
+def svg_chart(points, noise, reference, title, path):
     w, h, m = 760, 500, 72
-    xs = [p["cpu_seconds"] for p in points]
+    xs = [p["cpu_seconds"] for p in points] + [reference["cpu_seconds"]]
     ys = [max(p["error_vs_finest"], 1e-4) for p in points] + [noise]
     lx0, lx1 = math.log10(min(xs)) - 0.12, math.log10(max(xs)) + 0.25
     ly0, ly1 = math.log10(min(ys)) - 0.2, math.log10(max(ys)) + 0.2
@@ -125,6 +126,10 @@ def svg_chart(points, noise, title, path):
                            f'<line y1="{m}" y2="{h-m}" x1="{X(v)}" x2="{X(v)}" stroke="#eee"/>')
     out.append(f'<line x1="{m}" x2="{w-m}" y1="{Y(noise)}" y2="{Y(noise)}" stroke="#777" stroke-dasharray="6 4"/>'
                f'<text x="{w-m-4}" y="{Y(noise)-5}" text-anchor="end" fill="#555">noise floor (realisations): {100*noise:.1f}%</text>')
+    # The reference has no error of its own: a vertical line at its cost.
+    xr = X(reference["cpu_seconds"])
+    out.append(f'<line x1="{xr}" x2="{xr}" y1="{m}" y2="{h-m}" stroke="#2a2" stroke-dasharray="3 3"/>'
+               f'<text x="{xr+4}" y="{h-m-6}" fill="#282">reference: {reference["label"]}</text>')
     # Pareto front: no other point both cheaper and more accurate.
     front = [p for p in points if not any(o["cpu_seconds"] < p["cpu_seconds"] and o["error_vs_finest"] < p["error_vs_finest"] for o in points)]
     front.sort(key=lambda p: p["cpu_seconds"])
@@ -289,7 +294,8 @@ def main():
     charted = [p for p in points if p["seeds"] and p["label"] != finest]
     if charted:
         title = f"speed against accuracy: {scenario_path.stem}, to phi = {a.phi_end}, seeds {','.join(map(str, seeds))}"
-        svg_chart(charted, noise if noise == noise else 1e-3, title, out / "sweep.svg")
+        reference = next(p for p in points if p["label"] == finest)
+        svg_chart(charted, noise if noise == noise else 1e-3, reference, title, out / "sweep.svg")
         print(f"wrote {out / 'sweep.csv'}, {out / 'runs.csv'} and {out / 'sweep.svg'}")
 
 
