@@ -184,7 +184,6 @@ fn parse_region(text: &str) -> std::result::Result<Region, String> {
     }
 }
 
-/// A checkpoint interval in seconds: a finite number > 0.
 /// "1 thread", "2 threads".
 fn thread_count(pool: &rayon::ThreadPool) -> String {
     match pool.current_num_threads() {
@@ -193,6 +192,7 @@ fn thread_count(pool: &rayon::ThreadPool) -> String {
     }
 }
 
+/// A checkpoint interval in seconds: a finite number > 0.
 fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(s) if s.is_finite() && s > 0.0 => Ok(s),
