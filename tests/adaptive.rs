@@ -11,7 +11,7 @@ use sdem::integration::parameters::{Adaptive, critical_time_step};
 use sdem::integration::{Instability, Parameters, World};
 use sdem::run::bench::dense_packing;
 use sdem::run::checkpoint::Checkpoint;
-use sdem::run::{RunError, RunOptions, resume_run, run_scenario};
+use sdem::run::{RunOptions, resume_run, run_scenario};
 use sdem::scenario::{Model, Scenario};
 use std::path::{Path, PathBuf};
 
@@ -435,14 +435,7 @@ fn adaptive_runs_are_deterministic_and_resume_bitwise() {
     };
     for stop in [500, mixed_step + 37, total - 100] {
         let dir = temp_dir(&format!("stop{stop}"));
-        let mut opts = options(&dir, 1_000_000_000);
-        opts.stop_after_step = Some(stop);
-        match run_scenario(&scenario, &opts) {
-            Err(RunError::Interrupted { step, .. }) => assert_eq!(step, stop),
-            other => panic!("expected an interruption at {stop}, got {other:?}"),
-        }
-        let path = dir.join("checkpoint.bin");
-        let c = Checkpoint::read(&path).unwrap();
+        let (c, path) = common::run_interrupted_at(&scenario, &options(&dir, 1_000_000_000), stop);
         assert_eq!(c.runner.levels.len(), 600);
         common::with_threads(2, || resume_run(&c, &path, &options(&dir, 1_000_000_000))).unwrap();
         assert_same_run(&dirs[0], &dir);

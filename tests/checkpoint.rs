@@ -5,7 +5,7 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sdem::run::checkpoint::{Checkpoint, CheckpointError, FORMAT_VERSION, RunnerState};
-use sdem::run::{RunError, RunOptions, build_world, resume_run, run_scenario};
+use sdem::run::{RunOptions, build_world, resume_run, run_scenario};
 use sdem::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -24,6 +24,16 @@ fn temp_dir(name: &str) -> PathBuf {
 
 fn options(out: &Path, every: u64) -> RunOptions {
     common::checkpointed(out, every)
+}
+
+/// Random kill moments: a generator seeded from the clock, so that every test run tries others.
+fn clock_seeded_rng() -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64,
+    )
 }
 
 /// The final state of a finished run, from its last (complete) checkpoint.
@@ -152,14 +162,7 @@ fn resume_from_a_checkpoint_is_bitwise_the_uninterrupted_run() {
     // Stops at a row step, off a row step, just after the start, in the second phase.
     for stop in [1000, 1234, 1, total - 500] {
         let dir = temp_dir(&format!("stop{stop}"));
-        let mut opts = options(&dir, 700);
-        opts.stop_after_step = Some(stop);
-        match run_scenario(&scenario, &opts) {
-            Err(RunError::Interrupted { step, .. }) => assert_eq!(step, stop),
-            other => panic!("expected an interruption at {stop}, got {other:?}"),
-        }
-        let path = dir.join("checkpoint.bin");
-        let c = Checkpoint::read(&path).unwrap();
+        let (c, path) = common::run_interrupted_at(&scenario, &options(&dir, 700), stop);
         assert_eq!(c.step, stop);
         assert!(!c.complete);
         resume_run(&c, &path, &options(&dir, 700)).unwrap();
@@ -274,12 +277,7 @@ fn killed_run_resumes_bitwise_identical() {
         "2",
         "--quiet",
     ]);
-    let mut rng = ChaCha8Rng::seed_from_u64(
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos() as u64,
-    );
+    let mut rng = clock_seeded_rng();
     let mut cut = 0;
     for attempt in 0..4 {
         let dir = base.join(format!("run{attempt}"));
@@ -546,12 +544,7 @@ fn wall_clock_checkpoints_resume_bitwise() {
     // Killed at a random moment after a wall-clock checkpoint, resumed with its interval.
     let base = temp_dir("wall-kill");
     let file = write_scenario(&base);
-    let mut rng = ChaCha8Rng::seed_from_u64(
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos() as u64,
-    );
+    let mut rng = clock_seeded_rng();
     let mut cut = 0;
     for attempt in 0..3 {
         let dir = base.join(format!("run{attempt}"));

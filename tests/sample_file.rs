@@ -52,9 +52,11 @@ fn first_run(dir: &Path) -> String {
         .to_string()
 }
 
-/// A scenario reading `first/grains.csv` in the box `fields`.
-fn second(fields: &str, loading: &str) -> String {
-    format!(
+/// Writes `dir/second.ron`: a scenario reading `first/grains.csv` in the box `fields`, and
+/// returns its path.
+fn write_second(dir: &Path, fields: &str, loading: &str) -> PathBuf {
+    let path = dir.join("second.ron");
+    let text = format!(
         r#"Scenario(
     name: "second",
     sample: ({fields}, file: "first/grains.csv"),
@@ -62,7 +64,9 @@ fn second(fields: &str, loading: &str) -> String {
     loading: [{loading}],
     output: (every: 50),
 )"#
-    )
+    );
+    std::fs::write(&path, text).unwrap();
+    path
 }
 
 fn grains_csv(path: &Path) -> Vec<Vec<f64>> {
@@ -78,8 +82,7 @@ fn grains_csv(path: &Path) -> Vec<Vec<f64>> {
 fn a_run_starts_from_its_own_grains_csv() {
     let dir = temp_dir("restart");
     let fields = first_run(&dir);
-    let path = dir.join("second.ron");
-    std::fs::write(&path, second(&fields, "Relax(until: Steps(300))")).unwrap();
+    let path = write_second(&dir, &fields, "Relax(until: Steps(300))");
     let (scenario, warnings) = Scenario::load(&path).unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
     // The world starts from the file's grains (12 significant digits), at rest, in the box.
@@ -149,15 +152,11 @@ fn a_run_starts_from_its_own_grains_csv() {
 fn a_run_from_a_file_resumes_bitwise() {
     let dir = temp_dir("resume");
     let fields = first_run(&dir);
-    let path = dir.join("second.ron");
-    std::fs::write(
-        &path,
-        second(
-            &fields,
-            "Relax(until: Steps(100)), Servo(sxx: 0.1, syy: 0.08, gain: 0.5, max_rate: 1e-2, until: Steps(400))",
-        ),
-    )
-    .unwrap();
+    let path = write_second(
+        &dir,
+        &fields,
+        "Relax(until: Steps(100)), Servo(sxx: 0.1, syy: 0.08, gain: 0.5, max_rate: 1e-2, until: Steps(400))",
+    );
     let (scenario, _) = Scenario::load(&path).unwrap();
     let reference = dir.join("ref");
     let mut opts = options(&reference);
@@ -194,28 +193,32 @@ fn a_run_from_a_file_resumes_bitwise() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `sdem run SCENARIO --out OUT --quiet`, which must fail with exit status 1: its stderr.
+fn sdem_run_fails(scenario: &Path, out: &Path) -> String {
+    let result = Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .arg("run")
+        .arg(scenario)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
+    assert_eq!(result.status.code(), Some(1), "{stderr}");
+    stderr
+}
+
 #[test]
 fn an_unreachable_stress_target_stops_the_run_with_an_error() {
     let dir = temp_dir("unreachable");
     let fields = first_run(&dir);
     // Incompressible grains under a servo at 5 E: the grains fill the box long before.
-    let path = dir.join("second.ron");
-    std::fs::write(
-        &path,
-        second(
-            &fields,
-            "Servo(sxx: 5.0, syy: 5.0, gain: 0.5, max_rate: 0.2, until: Steps(1000000))",
-        ),
-    )
-    .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .args(["run", path.to_str().unwrap(), "--out"])
-        .arg(dir.join("servo"))
-        .arg("--quiet")
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let path = write_second(
+        &dir,
+        &fields,
+        "Servo(sxx: 5.0, syy: 5.0, gain: 0.5, max_rate: 0.2, until: Steps(1000000))",
+    );
+    let stderr = sdem_run_fails(&path, &dir.join("servo"));
     for needle in [
         "warning: loading[0].sxx = 5",
         "error: step ",
@@ -234,14 +237,7 @@ fn an_unreachable_stress_target_stops_the_run_with_an_error() {
         .replace("PackingFraction(0.88)", "MeanStress(0.6)")
         .replace("material:", "contact: (b: 40.0),\n    material:");
     std::fs::write(&path, text).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .args(["run", path.to_str().unwrap(), "--out"])
-        .arg(dir.join("iso"))
-        .arg("--quiet")
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let stderr = sdem_run_fails(&path, &dir.join("iso"));
     for needle in [
         "warning: loading[0].until = 0.6",
         "contact law can carry",

@@ -2,7 +2,8 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 use sdem::grain::Grain;
-use sdem::run::RunOptions;
+use sdem::run::checkpoint::Checkpoint;
+use sdem::run::{RunError, RunOptions, run_scenario};
 use sdem::scenario::Scenario;
 use std::path::{Path, PathBuf};
 
@@ -77,4 +78,21 @@ pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T 
         .build()
         .unwrap()
         .install(f)
+}
+
+/// Runs `scenario` with `options` told to stop after step `stop`; asserts the run reports that
+/// interruption, and returns the checkpoint it left and the checkpoint's path.
+pub fn run_interrupted_at(
+    scenario: &Scenario,
+    options: &RunOptions,
+    stop: u64,
+) -> (Checkpoint, PathBuf) {
+    let mut options = options.clone();
+    options.stop_after_step = Some(stop);
+    match run_scenario(scenario, &options) {
+        Err(RunError::Interrupted { step, .. }) => assert_eq!(step, stop),
+        other => panic!("expected an interruption at {stop}, got {other:?}"),
+    }
+    let path = options.out_dir.join("checkpoint.bin");
+    (Checkpoint::read(&path).unwrap(), path)
 }
