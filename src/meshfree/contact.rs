@@ -85,21 +85,65 @@ fn norm(a: [f64; 2]) -> f64 {
     (a[0] * a[0] + a[1] * a[1]).sqrt()
 }
 
-/// Tributary length and the unit vectors s0->s1 and s1->s2 of boundary node `s`.
-fn tributary(model: &DiscModel, u: &[f64], s: usize) -> (f64, [f64; 2], [f64; 2], usize, usize) {
-    let nb = model.nodes.boundary_count;
-    let s0 = (s + nb - 1) % nb;
-    let s2 = (s + 1) % nb;
-    let d0 = sub(model.position(u, s), model.position(u, s0));
-    let d1 = sub(model.position(u, s2), model.position(u, s));
+/// One node-to-wall element (appendix C): slave node s1 with its contour neighbours s0, s2.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallNodeElement {
+    pub gap: f64,
+    /// T = <lambda - k g> (>= 0).
+    pub pressure: f64,
+    /// A_s (0 when the node is free).
+    pub tributary: f64,
+    /// Contact force on the DoF of [s0, s1, s2] (to be subtracted from a residual
+    /// `f_int - f_ext`).
+    pub force: [f64; 6],
+    /// `d force / d x` (to be subtracted from the residual's tangent); zero when free.
+    pub stiffness: [[f64; 6]; 6],
+}
+
+/// Evaluates the element of node s1 (`x = [x_s0, x_s1, x_s2]`, current positions) against a
+/// wall through `point` with unit `normal` (towards the grain).
+pub fn wall_node_element(
+    x: &[[f64; 2]; 3],
+    point: [f64; 2],
+    normal: [f64; 2],
+    lambda: f64,
+    stiffness: f64,
+    with_tangent: bool,
+) -> WallNodeElement {
+    let n = normal;
+    let g = (x[1][0] - point[0]) * n[0] + (x[1][1] - point[1]) * n[1];
+    let t = (lambda - stiffness * g).max(0.0);
+    let mut e = WallNodeElement {
+        gap: g,
+        pressure: t,
+        tributary: 0.0,
+        force: [0.0; 6],
+        stiffness: [[0.0; 6]; 6],
+    };
+    if t <= 0.0 {
+        return e;
+    }
+    let d0 = sub(x[1], x[0]);
+    let d1 = sub(x[2], x[1]);
     let (l0, l1) = (norm(d0), norm(d1));
-    (
-        0.5 * (l0 + l1),
-        [d0[0] / l0, d0[1] / l0],
-        [d1[0] / l1, d1[1] / l1],
-        s0,
-        s2,
-    )
+    let (t0, t1) = ([d0[0] / l0, d0[1] / l0], [d1[0] / l1, d1[1] / l1]);
+    let a_s = 0.5 * (l0 + l1);
+    e.tributary = a_s;
+    e.force[2] = t * a_s * n[0];
+    e.force[3] = t * a_s * n[1];
+    if with_tangent {
+        // d(T A_s n)/dx = n ⊗ (A_s dT/dx + T dA_s/dx), dT/dx_s1 = -k n,
+        // dA_s/dx_s0 = -t0/2, dA_s/dx_s1 = (t0 - t1)/2, dA_s/dx_s2 = t1/2.
+        for i in 0..2 {
+            for j in 0..2 {
+                e.stiffness[2 + i][j] = -t * n[i] * 0.5 * t0[j];
+                e.stiffness[2 + i][2 + j] =
+                    -stiffness * a_s * n[i] * n[j] + t * n[i] * 0.5 * (t0[j] - t1[j]);
+                e.stiffness[2 + i][4 + j] = t * n[i] * 0.5 * t1[j];
+            }
+        }
+    }
+    e
 }
 
 /// Evaluates the wall contacts: subtracts the contact forces from `residual` (which holds
@@ -116,34 +160,43 @@ pub fn add_wall_contacts(
     let nb = model.nodes.boundary_count;
     let mut states = Vec::with_capacity(walls.len());
     for (w, wall) in walls.iter().enumerate() {
-        let n = wall.normal;
         let mut st = WallState {
             pressure: vec![0.0; nb],
             gap: vec![0.0; nb],
             tributary: vec![0.0; nb],
         };
         for s in 0..nb {
-            let g = wall.gap(model.position(u, s));
-            let lambda = multipliers.values[w][s];
-            let t = (lambda - stiffness * g).max(0.0);
-            st.gap[s] = g;
-            if t <= 0.0 {
+            let nodes = [(s + nb - 1) % nb, s, (s + 1) % nb];
+            let x = nodes.map(|a| model.position(u, a));
+            let e = wall_node_element(
+                &x,
+                wall.point,
+                wall.normal,
+                multipliers.values[w][s],
+                stiffness,
+                tangent.is_some(),
+            );
+            st.gap[s] = e.gap;
+            if e.pressure <= 0.0 {
                 continue;
             }
-            let (a_s, t0, t1, s0, s2) = tributary(model, u, s);
-            st.pressure[s] = t;
-            st.tributary[s] = a_s;
-            residual[2 * s] -= t * a_s * n[0];
-            residual[2 * s + 1] -= t * a_s * n[1];
+            st.pressure[s] = e.pressure;
+            st.tributary[s] = e.tributary;
+            for (p, &a) in nodes.iter().enumerate() {
+                residual[2 * a] -= e.force[2 * p];
+                residual[2 * a + 1] -= e.force[2 * p + 1];
+            }
             if let Some(k) = tangent.as_deref_mut() {
-                // d(residual_s)/du = -n ⊗ (A_s dT/du + T dA_s/du), dT/du_s = -k n.
-                for i in 0..2 {
-                    for j in 0..2 {
-                        let row = 2 * s + i;
-                        k.add(row, 2 * s + j, stiffness * a_s * n[i] * n[j]);
-                        k.add(row, 2 * s + j, -t * n[i] * 0.5 * (t0[j] - t1[j]));
-                        k.add(row, 2 * s0 + j, t * n[i] * 0.5 * t0[j]);
-                        k.add(row, 2 * s2 + j, -t * n[i] * 0.5 * t1[j]);
+                for (p, &a) in nodes.iter().enumerate() {
+                    for (q, &b) in nodes.iter().enumerate() {
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                let v = e.stiffness[2 * p + i][2 * q + j];
+                                if v != 0.0 {
+                                    k.add(2 * a + i, 2 * b + j, -v);
+                                }
+                            }
+                        }
                     }
                 }
             }

@@ -12,6 +12,7 @@
 //! Not implemented: the grain–grain smoothed node-to-segment element (appendix B), so the
 //! meshfree path handles one grain among walls.
 
+pub mod assembly;
 pub mod contact;
 pub mod discretization;
 pub mod material;
@@ -19,10 +20,12 @@ pub mod model;
 pub mod rpim;
 pub mod solver;
 
-pub use contact::{Multipliers, Wall, WallState, add_wall_contacts, contact_length};
+pub use contact::{
+    Multipliers, Wall, WallNodeElement, WallState, add_wall_contacts, contact_length, wall_node_element,
+};
 pub use discretization::{DiscNodes, GaussPoint, IntegrationMesh, NodeDensity};
 pub use material::{Hyperelastic, HyperelasticLaw, StressResponse};
-pub use model::{Dense, DiscModel};
+pub use model::{BlockPattern, Dense, DiscModel, GrainModel, NodeSet};
 pub use rpim::{Rpim, SUPPORT_NEIGHBOURS, ShapeFunctions};
 pub use solver::{
     DynamicState, DynamicTerms, Dynamics, Problem, SolveStats, SolverSettings, TimeScheme, lu_solve,

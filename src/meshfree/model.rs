@@ -62,10 +62,48 @@ impl Dense {
     }
 }
 
-/// A meshfree disc ready to be solved.
+/// Field nodes of one grain in the reference configuration: the first `boundary_count` are the
+/// contour nodes, counter-clockwise, the others lie inside.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeSet {
+    pub positions: Vec<[f64; 2]>,
+    pub boundary_count: usize,
+}
+
+impl NodeSet {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+}
+
+impl From<DiscNodes> for NodeSet {
+    fn from(d: DiscNodes) -> Self {
+        Self {
+            positions: d.positions,
+            boundary_count: d.boundary_count,
+        }
+    }
+}
+
+/// The node pairs `(a, b)` that share at least one Gauss point: the nonzero 2 x 2 blocks of a
+/// grain's tangent and mass, column-major (`b` outer, `a` inner, both increasing).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockPattern {
+    pub pairs: Vec<(u32, u32)>,
+}
+
+/// A meshfree grain ready to be solved: its field nodes (any star-shaped contour; a disc with
+/// [`GrainModel::disc`]), shape functions at the Gauss points, mass, and the block pattern of
+/// its tangent.
+pub type DiscModel = GrainModel;
+
 #[derive(Debug, Clone)]
-pub struct DiscModel {
-    pub nodes: DiscNodes,
+pub struct GrainModel {
+    pub nodes: NodeSet,
     pub mesh: IntegrationMesh,
     pub rpim: Rpim,
     pub material: Hyperelastic,
@@ -79,9 +117,12 @@ pub struct DiscModel {
     gp_weight: Vec<f64>,
     /// Scalar consistent mass `m_ab = sum_gp rho w Phi_a Phi_b` (the 2N x 2N mass is m ⊗ I2).
     pub scalar_mass: Dense,
+    pub pattern: BlockPattern,
+    /// `m_ab` on the pairs of `pattern`.
+    pub pattern_mass: Vec<f64>,
 }
 
-impl DiscModel {
+impl GrainModel {
     /// Nodes, triangulation, shape functions and mass of a disc centred at the origin.
     pub fn disc(
         radius: f64,
@@ -92,9 +133,36 @@ impl DiscModel {
         Self::from_nodes(nodes, material)
     }
 
-    pub fn from_nodes(nodes: DiscNodes, material: Hyperelastic) -> Result<Self, MeshfreeError> {
-        let rpim = Rpim::new(&nodes.positions)?;
+    /// A disc's nodes (or any convex node set) with the Delaunay mesh of their convex hull.
+    pub fn from_nodes(
+        nodes: impl Into<NodeSet>,
+        material: Hyperelastic,
+    ) -> Result<Self, MeshfreeError> {
+        let nodes = nodes.into();
+        if nodes.len() <= super::SUPPORT_NEIGHBOURS {
+            return Err(MeshfreeError::TooCoarse {
+                nodes: nodes.len(),
+                needed: super::SUPPORT_NEIGHBOURS + 1,
+            });
+        }
         let mesh = IntegrationMesh::delaunay(&nodes.positions)?;
+        Self::from_parts(nodes, mesh, material)
+    }
+
+    /// A grain from its nodes and an integration mesh covering its inside.
+    pub fn from_parts(
+        nodes: NodeSet,
+        mesh: IntegrationMesh,
+        material: Hyperelastic,
+    ) -> Result<Self, MeshfreeError> {
+        if nodes.boundary_count < 3 || nodes.boundary_count > nodes.len() {
+            return Err(MeshfreeError::BadInput(format!(
+                "a grain needs at least 3 contour nodes among its field nodes, got {} of {}",
+                nodes.boundary_count,
+                nodes.len()
+            )));
+        }
+        let rpim = Rpim::new(&nodes.positions)?;
         let mut gp_offsets = vec![0];
         let (mut gp_nodes, mut gp_phi, mut gp_dx, mut gp_dy, mut gp_weight) =
             (vec![], vec![], vec![], vec![], vec![]);
@@ -118,6 +186,25 @@ impl DiscModel {
                 }
             }
         }
+        let mut coupled = vec![false; n * n];
+        for g in 0..gp_weight.len() {
+            let r = gp_offsets[g]..gp_offsets[g + 1];
+            for &b in &gp_nodes[r.clone()] {
+                for &a in &gp_nodes[r.clone()] {
+                    coupled[b * n + a] = true;
+                }
+            }
+        }
+        let mut pairs = Vec::new();
+        let mut pattern_mass = Vec::new();
+        for b in 0..n {
+            for a in 0..n {
+                if coupled[b * n + a] {
+                    pairs.push((a as u32, b as u32));
+                    pattern_mass.push(scalar_mass.get(a, b));
+                }
+            }
+        }
         Ok(Self {
             nodes,
             mesh,
@@ -130,7 +217,69 @@ impl DiscModel {
             gp_dy,
             gp_weight,
             scalar_mass,
+            pattern: BlockPattern { pairs },
+            pattern_mass,
         })
+    }
+
+    /// The 2 x 2 blocks of a dense 2N x 2N matrix on the pattern's pairs,
+    /// `[K_ax,bx, K_ay,bx, K_ax,by, K_ay,by]` (column-major within the block).
+    pub fn pattern_blocks(&self, k: &Dense, out: &mut Vec<[f64; 4]>) {
+        out.clear();
+        out.extend(self.pattern.pairs.iter().map(|&(a, b)| {
+            let (a, b) = (a as usize, b as usize);
+            [
+                k.get(2 * a, 2 * b),
+                k.get(2 * a + 1, 2 * b),
+                k.get(2 * a, 2 * b + 1),
+                k.get(2 * a + 1, 2 * b + 1),
+            ]
+        }));
+    }
+
+    /// Current area and area centroid of the contour polygon (boundary nodes at `X + u`).
+    pub fn contour_area_centroid(&self, u: &[f64]) -> (f64, [f64; 2]) {
+        let nb = self.nodes.boundary_count;
+        let (mut a2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for s in 0..nb {
+            let p = self.position(u, s);
+            let q = self.position(u, (s + 1) % nb);
+            let cross = p[0] * q[1] - q[0] * p[1];
+            a2 += cross;
+            cx += (p[0] + q[0]) * cross;
+            cy += (p[1] + q[1]) * cross;
+        }
+        (0.5 * a2, [cx / (3.0 * a2), cy / (3.0 * a2)])
+    }
+
+    /// Integral of the Cauchy stress over the current grain, `sum_gp w P F^T` (tension
+    /// positive; `sigma J = P F^T` and `dA = J dA_0`). Divided by the current area it is the
+    /// grain's mean stress tensor.
+    pub fn stress_integral(&self, u: &[f64]) -> Result<[[f64; 2]; 2], MeshfreeError> {
+        let mut out = [[0.0; 2]; 2];
+        for g in 0..self.gp_weight.len() {
+            let f = self.deformation_gradient(g, u);
+            let resp = self.material.response(f).ok_or(MeshfreeError::Inverted {
+                position: self.mesh.gauss_points[g].position,
+                det: f[0][0] * f[1][1] - f[0][1] * f[1][0],
+            })?;
+            let w = self.gp_weight[g];
+            for (i, row) in out.iter_mut().enumerate() {
+                for (j, v) in row.iter_mut().enumerate() {
+                    *v += w * (resp.p[i][0] * f[j][0] + resp.p[i][1] * f[j][1]);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// `M v` with the mass stored on the pattern (cheap for large grains).
+    pub fn pattern_mass_mul(&self, v: &[f64], out: &mut [f64]) {
+        for (&(a, b), &m) in self.pattern.pairs.iter().zip(&self.pattern_mass) {
+            let (a, b) = (a as usize, b as usize);
+            out[2 * a] += m * v[2 * b];
+            out[2 * a + 1] += m * v[2 * b + 1];
+        }
     }
 
     pub fn node_count(&self) -> usize {

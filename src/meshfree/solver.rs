@@ -73,6 +73,71 @@ pub struct DynamicTerms<'a> {
     pub damping: Option<&'a Dense>,
 }
 
+impl<'a> DynamicTerms<'a> {
+    /// Trapezoidal rule on an interval `h` from `(u0, v0, a0)`:
+    /// `U = U0 + h/2 (V0 + V)`, `V = V0 + h/2 (A0 + A)`.
+    pub fn trapezoidal(
+        h: f64,
+        u0: &[f64],
+        v0: &[f64],
+        a0: &[f64],
+        damping: Option<&'a Dense>,
+    ) -> Self {
+        let c_m = 4.0 / (h * h);
+        let c_v = 2.0 / h;
+        Self {
+            c_m,
+            c_v,
+            a_const: (0..u0.len())
+                .map(|i| -c_m * u0[i] - 4.0 / h * v0[i] - a0[i])
+                .collect(),
+            v_const: (0..u0.len()).map(|i| -c_v * u0[i] - v0[i]).collect(),
+            damping,
+        }
+    }
+
+    /// Three-point backward Euler over `dt` after the mid-step state `(u1, v1)` (second
+    /// sub-step of Bathe's scheme): `V2 = (U0 - 4 U1 + 3 U2)/dt`, `A2 = (V0 - 4 V1 + 3 V2)/dt`.
+    pub fn backward_euler3(
+        dt: f64,
+        u0: &[f64],
+        u1: &[f64],
+        v0: &[f64],
+        v1: &[f64],
+        damping: Option<&'a Dense>,
+    ) -> Self {
+        let c_v = 3.0 / dt;
+        let v_const: Vec<f64> = (0..u0.len()).map(|i| (u0[i] - 4.0 * u1[i]) / dt).collect();
+        let c_m = 9.0 / (dt * dt);
+        let a_const: Vec<f64> = (0..u0.len())
+            .map(|i| (v0[i] - 4.0 * v1[i]) / dt + 3.0 / dt * v_const[i])
+            .collect();
+        Self {
+            c_m,
+            c_v,
+            a_const,
+            v_const,
+            damping,
+        }
+    }
+
+    /// Velocity at the solved displacement `u`.
+    pub fn velocity(&self, u: &[f64]) -> Vec<f64> {
+        u.iter()
+            .zip(&self.v_const)
+            .map(|(u, v)| self.c_v * u + v)
+            .collect()
+    }
+
+    /// Acceleration at the solved displacement `u`.
+    pub fn acceleration(&self, u: &[f64]) -> Vec<f64> {
+        u.iter()
+            .zip(&self.a_const)
+            .map(|(u, a)| self.c_m * u + a)
+            .collect()
+    }
+}
+
 /// Solves `K x = b` in place (dense LU with partial pivoting, sequential). `k` is overwritten.
 pub fn lu_solve(k: &mut Dense, b: &mut [f64]) -> Result<(), MeshfreeError> {
     let n = k.n;
@@ -272,9 +337,6 @@ impl Problem<'_> {
     }
 }
 
-/// Velocity, acceleration and wall states at the end of a (sub-)step.
-type SubStepResult = Result<(Vec<f64>, Vec<f64>, Vec<WallState>), MeshfreeError>;
-
 /// Time integration schemes for the dynamic runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TimeScheme {
@@ -379,69 +441,29 @@ impl<'a> Dynamics<'a> {
         let damping = self.damping.as_ref();
         let (u0, v0, a0) = (state.u.clone(), state.v.clone(), state.a.clone());
         let mut stats = SolveStats::default();
-        // Trapezoidal rule on an interval h from (u0, v0, a0).
-        let trapezoid = |h: f64,
-                         u: &mut Vec<f64>,
-                         mult: &mut Multipliers,
-                         stats: &mut SolveStats|
-         -> SubStepResult {
-            let c_m = 4.0 / (h * h);
-            let c_v = 2.0 / h;
-            let terms = DynamicTerms {
-                c_m,
-                c_v,
-                a_const: (0..u0.len())
-                    .map(|i| -c_m * u0[i] - 4.0 / h * v0[i] - a0[i])
-                    .collect(),
-                v_const: (0..u0.len()).map(|i| -c_v * u0[i] - v0[i]).collect(),
-                damping,
-            };
-            let (walls, s) = p.solve(u, mult, Some(&terms))?;
-            *stats += s;
-            let v: Vec<f64> = (0..u.len())
-                .map(|i| c_v * u[i] + terms.v_const[i])
-                .collect();
-            let a: Vec<f64> = (0..u.len())
-                .map(|i| c_m * u[i] + terms.a_const[i])
-                .collect();
-            Ok((v, a, walls))
+        let mid = match scheme {
+            TimeScheme::Trapezoidal => dt,
+            TimeScheme::Bathe => 0.5 * dt,
         };
+        let terms = DynamicTerms::trapezoidal(mid, &u0, &v0, &a0, damping);
+        let mut u1 = u0.clone();
+        let (walls, s) = p.solve(&mut u1, &mut state.multipliers, Some(&terms))?;
+        stats += s;
+        let v1 = terms.velocity(&u1);
         match scheme {
             TimeScheme::Trapezoidal => {
-                let mut u = u0.clone();
-                let (v, a, walls) = trapezoid(dt, &mut u, &mut state.multipliers, &mut stats)?;
-                state.u = u;
-                state.v = v;
-                state.a = a;
+                state.a = terms.acceleration(&u1);
+                state.v = v1;
+                state.u = u1;
                 state.walls = walls;
             }
             TimeScheme::Bathe => {
-                let mut u1 = u0.clone();
-                let (v1, _a1, _) =
-                    trapezoid(0.5 * dt, &mut u1, &mut state.multipliers, &mut stats)?;
-                // 3-point backward Euler: V2 = (U0 - 4U1 + 3U2)/dt, A2 = (V0 - 4V1 + 3V2)/dt.
-                let c_v = 3.0 / dt;
-                let v_const: Vec<f64> = (0..u0.len()).map(|i| (u0[i] - 4.0 * u1[i]) / dt).collect();
-                let c_m = 9.0 / (dt * dt);
-                let a_const: Vec<f64> = (0..u0.len())
-                    .map(|i| (v0[i] - 4.0 * v1[i]) / dt + 3.0 / dt * v_const[i])
-                    .collect();
-                let terms = DynamicTerms {
-                    c_m,
-                    c_v,
-                    a_const,
-                    v_const,
-                    damping,
-                };
+                let terms = DynamicTerms::backward_euler3(dt, &u0, &u1, &v0, &v1, damping);
                 let mut u2 = u1.clone();
                 let (walls, s) = p.solve(&mut u2, &mut state.multipliers, Some(&terms))?;
                 stats += s;
-                state.v = (0..u2.len())
-                    .map(|i| c_v * u2[i] + terms.v_const[i])
-                    .collect();
-                state.a = (0..u2.len())
-                    .map(|i| c_m * u2[i] + terms.a_const[i])
-                    .collect();
+                state.v = terms.velocity(&u2);
+                state.a = terms.acceleration(&u2);
                 state.u = u2;
                 state.walls = walls;
             }

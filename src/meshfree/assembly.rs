@@ -1,0 +1,810 @@
+//! Many meshfree grains in contact (SPEC §10b): one displacement vector over all grains, a
+//! block-sparse tangent (a block per grain, coupled by contact elements), the two-pass smoothed
+//! node-to-segment element between grains ([`super::nts`]), node-to-wall elements against the
+//! box walls, Newton loops nested in augmented-Lagrangian loops, and the Bathe composite or
+//! trapezoidal dynamic schemes with sub-steps on non-convergence.
+//!
+//! Determinism: every grain's internal forces and tangent blocks are computed in parallel into
+//! its own buffers, and every slave grain's contact elements likewise; they are gathered in a
+//! fixed order (grains by index, then contact elements by slave grain, master, slave node), and
+//! the sparse factorization is sequential. Results are bitwise identical whatever the number of
+//! threads.
+//!
+//! Sign conventions: the residual is `f_int - f_ext - f_contact + M A + C V`; a contact's
+//! pressure `T = <lambda - k g>` is positive in compression, its gap `g` negative when the
+//! slave node is inside the master.
+
+use std::collections::BTreeMap;
+
+use rayon::prelude::*;
+
+use super::MeshfreeError;
+use super::contact::wall_node_element;
+use super::model::{Dense, GrainModel};
+use super::nts;
+use super::solver::{DynamicTerms, SolveStats, SolverSettings, TimeScheme};
+use super::sparse::{SparseSolver, TripletMatrix};
+use crate::boundary::walls::Wall;
+
+/// What a slave node presses against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Master {
+    /// The contour of another grain (node-to-segment element).
+    Grain(u32),
+    /// One of the box walls (node-to-wall element).
+    Wall(u32),
+}
+
+/// One contact element: a boundary node of a slave grain against a master.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ContactKey {
+    pub slave: u32,
+    pub node: u32,
+    pub master: Master,
+}
+
+/// Augmented-Lagrangian multipliers (contact pressures, > 0) of the active elements.
+pub type ContactMultipliers = BTreeMap<ContactKey, f64>;
+
+/// An evaluated, active contact element.
+#[derive(Debug, Clone)]
+pub struct ContactElement {
+    pub key: ContactKey,
+    pub gap: f64,
+    pub pressure: f64,
+    pub tributary: f64,
+    /// Unit normal of the force on the slave node.
+    pub normal: [f64; 2],
+    /// Where the slave node is (current position).
+    pub point: [f64; 2],
+    /// Global DoF of the element's nodes (6 for a wall element, 14 for node-to-segment).
+    pub dofs: Vec<usize>,
+    /// Force on those DoF.
+    pub force: Vec<f64>,
+    /// `d force / d x`, row-major `dofs.len()` squared (empty without tangent).
+    pub stiffness: Vec<f64>,
+}
+
+/// Residual, contact elements and energies at one displacement.
+#[derive(Debug, Clone, Default)]
+pub struct Evaluation {
+    pub residual: Vec<f64>,
+    pub elements: Vec<ContactElement>,
+    pub elastic_energy: f64,
+    /// The largest magnitude among the terms summed into the residual, for a round-off floor
+    /// on the Newton tolerance.
+    pub force_scale: f64,
+}
+
+impl Evaluation {
+    /// Deepest interpenetration among the active elements (a length, >= 0).
+    pub fn max_penetration(&self) -> f64 {
+        self.elements
+            .iter()
+            .map(|e| (-e.gap).max(0.0))
+            .fold(0.0, f64::max)
+    }
+
+    /// Largest |g| over active elements (the augmentation loop's stop test).
+    pub fn max_abs_gap(&self) -> f64 {
+        self.elements.iter().map(|e| e.gap.abs()).fold(0.0, f64::max)
+    }
+
+    /// Total force of the grains on wall `w` (a vector: minus the sum of the wall elements'
+    /// forces on the grains).
+    pub fn wall_force(&self, w: usize) -> [f64; 2] {
+        let mut f = [0.0; 2];
+        for e in &self.elements {
+            if e.key.master == Master::Wall(w as u32) {
+                let t = e.pressure * e.tributary;
+                f[0] -= t * e.normal[0];
+                f[1] -= t * e.normal[1];
+            }
+        }
+        f
+    }
+
+    /// Sum of all contact forces (zero to round-off: momentum balance).
+    pub fn grain_contact_force_sum(&self) -> ([f64; 2], f64) {
+        let (mut s, mut mag) = ([0.0; 2], 0.0f64);
+        for e in self
+            .elements
+            .iter()
+            .filter(|e| matches!(e.key.master, Master::Grain(_)))
+        {
+            for (k, f) in e.force.iter().enumerate() {
+                s[k % 2] += f;
+                mag = mag.max(f.abs());
+            }
+        }
+        (s, mag)
+    }
+
+    /// Grain pairs `(i, j)`, `i < j`, with at least one active element between them (either
+    /// pass), sorted.
+    pub fn contact_pairs(&self) -> Vec<(u32, u32)> {
+        let mut pairs: Vec<(u32, u32)> = self
+            .elements
+            .iter()
+            .filter_map(|e| match e.key.master {
+                Master::Grain(j) => Some((e.key.slave.min(j), e.key.slave.max(j))),
+                Master::Wall(_) => None,
+            })
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        pairs
+    }
+}
+
+/// State of a dynamic run of an assembly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssemblyState {
+    pub time: f64,
+    pub u: Vec<f64>,
+    pub v: Vec<f64>,
+    pub a: Vec<f64>,
+    pub multipliers: ContactMultipliers,
+}
+
+/// Counters of one step.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepStats {
+    pub solve: SolveStats,
+    /// Sub-steps taken (1 when the step converged at once).
+    pub sub_steps: usize,
+}
+
+/// Grains, walls and solver settings.
+#[derive(Debug)]
+pub struct Assembly {
+    pub grains: Vec<GrainModel>,
+    /// First global DoF of each grain, and the total at the end.
+    offsets: Vec<usize>,
+    /// Box walls at their current positions (their `velocity` moves them during a step).
+    pub walls: Vec<Wall>,
+    pub gravity: [f64; 2],
+    pub settings: SolverSettings,
+    /// Rayleigh damping `C = alpha M + beta K_i0`.
+    pub rayleigh: (f64, f64),
+    /// DoF held at their current value (quasi-static problems: rigid modes).
+    pub fixed: Vec<usize>,
+    /// Slave nodes farther than this from a master grain's bounding box are not tested.
+    pub near_distance: f64,
+    /// Smallest sub-step, as a fraction of the step (a power of 1/2).
+    pub min_sub_step: f64,
+    external: Vec<f64>,
+    initial_stiffness: Vec<Vec<[f64; 4]>>,
+    solver: SparseSolver,
+}
+
+/// Current boundary positions of a grain.
+fn contour(model: &GrainModel, u: &[f64]) -> Vec<[f64; 2]> {
+    (0..model.nodes.boundary_count)
+        .map(|s| model.position(u, s))
+        .collect()
+}
+
+fn bounding_box(points: &[[f64; 2]]) -> [f64; 4] {
+    points.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])],
+    )
+}
+
+impl Assembly {
+    /// An assembly of grains (reference node positions in the global frame) in a box of walls.
+    pub fn new(
+        grains: Vec<GrainModel>,
+        walls: Vec<Wall>,
+        gravity: [f64; 2],
+        rayleigh: (f64, f64),
+        settings: SolverSettings,
+    ) -> Result<Self, MeshfreeError> {
+        if grains.is_empty() {
+            return Err(MeshfreeError::BadInput("an assembly needs grains".into()));
+        }
+        let mut offsets = vec![0];
+        for g in &grains {
+            offsets.push(offsets.last().unwrap() + g.dofs());
+        }
+        let external = grains
+            .iter()
+            .flat_map(|g| g.body_force(gravity))
+            .collect();
+        let initial_stiffness = if rayleigh.1 != 0.0 {
+            grains
+                .par_iter()
+                .map(|g| {
+                    let k = g.initial_stiffness()?;
+                    let mut blocks = Vec::new();
+                    g.pattern_blocks(&k, &mut blocks);
+                    Ok(blocks)
+                })
+                .collect::<Result<Vec<_>, MeshfreeError>>()?
+        } else {
+            Vec::new()
+        };
+        let spacing = grains
+            .iter()
+            .map(|g| {
+                let c = contour(g, &vec![0.0; g.dofs()]);
+                let nb = c.len();
+                (0..nb)
+                    .map(|s| {
+                        let (p, q) = (c[s], c[(s + 1) % nb]);
+                        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+                    })
+                    .fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max);
+        Ok(Self {
+            grains,
+            offsets,
+            walls,
+            gravity,
+            settings,
+            rayleigh,
+            fixed: Vec::new(),
+            near_distance: 2.0 * spacing,
+            min_sub_step: 1.0 / 16.0,
+            external,
+            initial_stiffness,
+            solver: SparseSolver::new(),
+        })
+    }
+
+    pub fn dofs(&self) -> usize {
+        *self.offsets.last().unwrap()
+    }
+
+    /// First global DoF of grain `g`.
+    pub fn offset(&self, g: usize) -> usize {
+        self.offsets[g]
+    }
+
+    /// The slice of a global vector that belongs to grain `g`.
+    pub fn grain_slice<'v>(&self, v: &'v [f64], g: usize) -> &'v [f64] {
+        &v[self.offsets[g]..self.offsets[g + 1]]
+    }
+
+    /// Sparse-solver counters: (symbolic analyses, numeric factorizations).
+    pub fn factorizations(&self) -> (usize, usize) {
+        (self.solver.symbolic_count(), self.solver.numeric_count())
+    }
+
+    /// Grain pairs whose bounding boxes, grown by `near_distance`, overlap: for each grain the
+    /// sorted list of the others (sweep and prune along x).
+    fn neighbours(&self, contours: &[Vec<[f64; 2]>]) -> Vec<Vec<u32>> {
+        let d = self.near_distance;
+        let boxes: Vec<[f64; 4]> = contours.iter().map(|c| bounding_box(c)).collect();
+        let mut order: Vec<usize> = (0..boxes.len()).collect();
+        order.sort_by(|&a, &b| boxes[a][0].total_cmp(&boxes[b][0]).then(a.cmp(&b)));
+        let mut out = vec![Vec::new(); boxes.len()];
+        for (k, &i) in order.iter().enumerate() {
+            for &j in &order[k + 1..] {
+                if boxes[j][0] > boxes[i][2] + d {
+                    break;
+                }
+                if boxes[j][1] <= boxes[i][3] + d && boxes[i][1] <= boxes[j][3] + d {
+                    out[i].push(j as u32);
+                    out[j].push(i as u32);
+                }
+            }
+        }
+        for l in &mut out {
+            l.sort_unstable();
+        }
+        out
+    }
+
+    /// Active contact elements of slave grain `i` (grain masters first, by index, then walls).
+    #[allow(clippy::too_many_arguments)]
+    fn slave_elements(
+        &self,
+        i: usize,
+        contours: &[Vec<[f64; 2]>],
+        masters: &[u32],
+        multipliers: &ContactMultipliers,
+        k: f64,
+        with_tangent: bool,
+    ) -> Vec<ContactElement> {
+        let mut out = Vec::new();
+        let slave = &contours[i];
+        let nb = slave.len();
+        let off_i = self.offsets[i];
+        let lambda_of = |key: &ContactKey| multipliers.get(key).copied().unwrap_or(0.0);
+        let d = self.near_distance;
+        for &j in masters {
+            let j = j as usize;
+            let master = &contours[j];
+            let mb = master.len();
+            let bb = bounding_box(master);
+            let off_j = self.offsets[j];
+            for s in 0..nb {
+                let xs = slave[s];
+                if xs[0] < bb[0] - d || xs[0] > bb[2] + d || xs[1] < bb[1] - d || xs[1] > bb[3] + d
+                {
+                    continue;
+                }
+                let closest = (0..mb)
+                    .min_by(|&a, &b| dist2(master[a], xs).total_cmp(&dist2(master[b], xs)))
+                    .unwrap();
+                let Some((first, _)) = nts::master_segment(master, closest, xs) else {
+                    continue;
+                };
+                let key = ContactKey {
+                    slave: i as u32,
+                    node: s as u32,
+                    master: Master::Grain(j as u32),
+                };
+                let slave_nodes = [(s + nb - 1) % nb, s, (s + 1) % nb];
+                let master_nodes = [
+                    (first + mb - 1) % mb,
+                    first,
+                    (first + 1) % mb,
+                    (first + 2) % mb,
+                ];
+                let x = [
+                    slave[slave_nodes[0]],
+                    slave[slave_nodes[1]],
+                    slave[slave_nodes[2]],
+                    master[master_nodes[0]],
+                    master[master_nodes[1]],
+                    master[master_nodes[2]],
+                    master[master_nodes[3]],
+                ];
+                let Some(e) = nts::evaluate(&x, lambda_of(&key), k, with_tangent) else {
+                    continue;
+                };
+                if e.pressure <= 0.0 {
+                    continue;
+                }
+                let mut dofs = Vec::with_capacity(14);
+                for a in slave_nodes {
+                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
+                }
+                for a in master_nodes {
+                    dofs.extend([off_j + 2 * a, off_j + 2 * a + 1]);
+                }
+                out.push(ContactElement {
+                    key,
+                    gap: e.gap,
+                    pressure: e.pressure,
+                    tributary: e.tributary,
+                    normal: e.normal,
+                    point: xs,
+                    dofs,
+                    force: e.force.to_vec(),
+                    stiffness: if with_tangent {
+                        e.stiffness.iter().flatten().copied().collect()
+                    } else {
+                        Vec::new()
+                    },
+                });
+            }
+        }
+        for (w, wall) in self.walls.iter().enumerate() {
+            let (p, n) = ([wall.point.x, wall.point.y], [wall.normal.x, wall.normal.y]);
+            for s in 0..nb {
+                let key = ContactKey {
+                    slave: i as u32,
+                    node: s as u32,
+                    master: Master::Wall(w as u32),
+                };
+                let nodes = [(s + nb - 1) % nb, s, (s + 1) % nb];
+                let x = nodes.map(|a| slave[a]);
+                let e = wall_node_element(&x, p, n, lambda_of(&key), k, with_tangent);
+                if e.pressure <= 0.0 {
+                    continue;
+                }
+                let mut dofs = Vec::with_capacity(6);
+                for a in nodes {
+                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
+                }
+                out.push(ContactElement {
+                    key,
+                    gap: e.gap,
+                    pressure: e.pressure,
+                    tributary: e.tributary,
+                    normal: n,
+                    point: x[1],
+                    dofs,
+                    force: e.force.to_vec(),
+                    stiffness: if with_tangent {
+                        e.stiffness.iter().flatten().copied().collect()
+                    } else {
+                        Vec::new()
+                    },
+                });
+            }
+        }
+        out
+    }
+
+    /// Residual and, if `tangent` is given, its Jacobian as triplets, at displacement `u`.
+    pub fn evaluate(
+        &self,
+        u: &[f64],
+        multipliers: &ContactMultipliers,
+        k: f64,
+        dynamic: Option<&DynamicTerms>,
+        tangent: Option<&mut TripletMatrix>,
+    ) -> Result<Evaluation, MeshfreeError> {
+        let with_tangent = tangent.is_some();
+        let (alpha, beta) = self.rayleigh;
+        // Per grain: internal forces, dynamic terms, tangent blocks.
+        let per_grain: Vec<(Vec<f64>, Vec<[f64; 4]>, f64, f64)> = (0..self.grains.len())
+            .into_par_iter()
+            .map(|g| {
+                let model = &self.grains[g];
+                let range = self.offsets[g]..self.offsets[g + 1];
+                let ug = &u[range.clone()];
+                let mut r: Vec<f64> = self.external[range.clone()].iter().map(|f| -f).collect();
+                let mut dense = with_tangent.then(|| Dense::zeros(model.dofs()));
+                let energy = model.internal(ug, &mut r, dense.as_mut())?;
+                let mut scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let mut blocks = Vec::new();
+                if let Some(d) = &dense {
+                    model.pattern_blocks(d, &mut blocks);
+                }
+                if let Some(dt) = dynamic {
+                    // M (A + alpha V) + beta K_i0 V, with A and V affine in u.
+                    let acc: Vec<f64> = range
+                        .clone()
+                        .map(|i| {
+                            dt.c_m * u[i]
+                                + dt.a_const[i]
+                                + alpha * (dt.c_v * u[i] + dt.v_const[i])
+                        })
+                        .collect();
+                    let mut inertia = vec![0.0; model.dofs()];
+                    model.pattern_mass_mul(&acc, &mut inertia);
+                    if beta != 0.0 {
+                        let k0 = &self.initial_stiffness[g];
+                        for (&(a, b), blk) in model.pattern.pairs.iter().zip(k0) {
+                            let (a, b) = (a as usize, b as usize);
+                            let vb = [
+                                dt.c_v * u[range.start + 2 * b] + dt.v_const[range.start + 2 * b],
+                                dt.c_v * u[range.start + 2 * b + 1]
+                                    + dt.v_const[range.start + 2 * b + 1],
+                            ];
+                            inertia[2 * a] += beta * (blk[0] * vb[0] + blk[2] * vb[1]);
+                            inertia[2 * a + 1] += beta * (blk[1] * vb[0] + blk[3] * vb[1]);
+                        }
+                    }
+                    for (ri, fi) in r.iter_mut().zip(&inertia) {
+                        scale = scale.max(fi.abs());
+                        *ri += fi;
+                    }
+                    if with_tangent {
+                        let cm = dt.c_m + alpha * dt.c_v;
+                        let k0 = self.initial_stiffness.get(g);
+                        for (p, blk) in blocks.iter_mut().enumerate() {
+                            let m = cm * model.pattern_mass[p];
+                            blk[0] += m;
+                            blk[3] += m;
+                            if let Some(k0) = k0 {
+                                for (b, k) in blk.iter_mut().zip(&k0[p]) {
+                                    *b += beta * dt.c_v * k;
+                                }
+                            }
+                        }
+                    }
+                }
+                Ok((r, blocks, energy, scale))
+            })
+            .collect::<Result<_, MeshfreeError>>()?;
+        let contours: Vec<Vec<[f64; 2]>> = self
+            .grains
+            .iter()
+            .enumerate()
+            .map(|(g, m)| contour(m, self.grain_slice(u, g)))
+            .collect();
+        let neighbours = self.neighbours(&contours);
+        let elements: Vec<ContactElement> = (0..self.grains.len())
+            .into_par_iter()
+            .map(|i| {
+                self.slave_elements(
+                    i,
+                    &contours,
+                    &neighbours[i],
+                    multipliers,
+                    k,
+                    with_tangent,
+                )
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .flatten()
+            .collect();
+        // Gather in a fixed order.
+        let mut residual = Vec::with_capacity(self.dofs());
+        let (mut elastic_energy, mut force_scale) = (0.0, 0.0f64);
+        for (r, _, e, s) in &per_grain {
+            residual.extend_from_slice(r);
+            elastic_energy += e;
+            force_scale = force_scale.max(*s);
+        }
+        for e in &elements {
+            for (&dof, f) in e.dofs.iter().zip(&e.force) {
+                residual[dof] -= f;
+                force_scale = force_scale.max(f.abs());
+            }
+        }
+        let mut fixed = vec![false; self.dofs()];
+        for &i in &self.fixed {
+            fixed[i] = true;
+            residual[i] = 0.0;
+        }
+        if let Some(t) = tangent {
+            t.clear();
+            for (g, (_, blocks, _, _)) in per_grain.iter().enumerate() {
+                let off = self.offsets[g];
+                for (&(a, b), blk) in self.grains[g].pattern.pairs.iter().zip(blocks) {
+                    let (ra, cb) = (off + 2 * a as usize, off + 2 * b as usize);
+                    for (q, (dr, dc)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                        let (row, col) = (ra + dr, cb + dc);
+                        if !fixed[row] && !fixed[col] {
+                            t.push(row, col, blk[q]);
+                        }
+                    }
+                }
+            }
+            for e in &elements {
+                let n = e.dofs.len();
+                for (p, &row) in e.dofs.iter().enumerate() {
+                    for (q, &col) in e.dofs.iter().enumerate() {
+                        if !fixed[row] && !fixed[col] {
+                            t.push(row, col, -e.stiffness[p * n + q]);
+                        }
+                    }
+                }
+            }
+            for &i in &self.fixed {
+                t.push(i, i, 1.0);
+            }
+        }
+        Ok(Evaluation {
+            residual,
+            elements,
+            elastic_energy,
+            force_scale,
+        })
+    }
+
+    fn all_points_valid(&self, u: &[f64]) -> bool {
+        (0..self.grains.len())
+            .into_par_iter()
+            .all(|g| self.grains[g].all_points_valid(self.grain_slice(u, g)))
+    }
+
+    /// Newton iterations at fixed multipliers and contact stiffness.
+    fn newton(
+        &mut self,
+        u: &mut Vec<f64>,
+        multipliers: &ContactMultipliers,
+        k: f64,
+        dynamic: Option<&DynamicTerms>,
+        stats: &mut SolveStats,
+    ) -> Result<Evaluation, MeshfreeError> {
+        let mut tangent = TripletMatrix::new(self.dofs());
+        let mut last = f64::INFINITY;
+        for _ in 0..self.settings.max_newton {
+            let eval = self.evaluate(u, multipliers, k, dynamic, Some(&mut tangent))?;
+            let norm = eval
+                .residual
+                .iter()
+                .fold(0.0f64, |s, v| s.max(v.abs()));
+            if !norm.is_finite() {
+                return Err(MeshfreeError::NotConverged(
+                    "the residual is not finite (NaN or infinity)".into(),
+                ));
+            }
+            last = norm;
+            if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
+                return Ok(eval);
+            }
+            stats.newton_iterations += 1;
+            let mut du: Vec<f64> = eval.residual.iter().map(|v| -v).collect();
+            self.solver.solve(&tangent, &mut du)?;
+            let mut step = 1.0;
+            let mut accepted = false;
+            for _ in 0..30 {
+                let trial: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + step * d).collect();
+                if self.all_points_valid(&trial) {
+                    *u = trial;
+                    accepted = true;
+                    break;
+                }
+                step *= 0.5;
+            }
+            if !accepted {
+                return Err(MeshfreeError::NotConverged(
+                    "every Newton step inverts the material (det F <= 0)".into(),
+                ));
+            }
+        }
+        Err(MeshfreeError::NotConverged(format!(
+            "Newton did not converge in {} iterations (residual {last:.3e} > {:.1e})",
+            self.settings.max_newton, self.settings.force_tolerance
+        )))
+    }
+
+    /// Newton loops nested in augmentation loops (k reset to k0, doubled at each
+    /// augmentation); `u` and `multipliers` are updated in place.
+    pub fn solve(
+        &mut self,
+        u: &mut Vec<f64>,
+        multipliers: &mut ContactMultipliers,
+        dynamic: Option<&DynamicTerms>,
+    ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        let s = self.settings;
+        let mut k = s.k0;
+        let mut stats = SolveStats::default();
+        for _ in 0..s.max_augmentations {
+            let eval = self.newton(u, multipliers, k, dynamic, &mut stats)?;
+            multipliers.clear();
+            for e in &eval.elements {
+                multipliers.insert(e.key, e.pressure);
+            }
+            stats.augmentations += 1;
+            stats.max_penetration = eval.max_penetration();
+            if eval.max_abs_gap() <= s.gap_tolerance {
+                return Ok((eval, stats));
+            }
+            k *= s.alpha_k;
+        }
+        Err(MeshfreeError::NotConverged(format!(
+            "the augmented Lagrangian did not reach the gap tolerance {:.1e} in {} augmentations \
+             (max penetration {:.3e})",
+            s.gap_tolerance, s.max_augmentations, stats.max_penetration
+        )))
+    }
+
+    /// Grains at rest, undeformed; the acceleration is gravity's (the consistent mass
+    /// reproduces a uniform field exactly).
+    pub fn initial_state(&self) -> AssemblyState {
+        let n = self.dofs();
+        AssemblyState {
+            time: 0.0,
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            a: (0..n).map(|i| self.gravity[i % 2]).collect(),
+            multipliers: ContactMultipliers::new(),
+        }
+    }
+
+    fn move_walls(&mut self, from: &[Wall], elapsed: f64) {
+        for (w, f) in self.walls.iter_mut().zip(from) {
+            w.point = f.point + f.velocity * elapsed;
+        }
+    }
+
+    /// One step of `dt` (walls moving at their velocities), without sub-steps.
+    fn try_step(
+        &mut self,
+        state: &mut AssemblyState,
+        dt: f64,
+        scheme: TimeScheme,
+    ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        let walls0 = self.walls.clone();
+        let (u0, v0, a0) = (&state.u, &state.v, &state.a);
+        let mut stats = SolveStats::default();
+        let mid = match scheme {
+            TimeScheme::Trapezoidal => dt,
+            TimeScheme::Bathe => 0.5 * dt,
+        };
+        let mut multipliers = state.multipliers.clone();
+        self.move_walls(&walls0, mid);
+        let terms = DynamicTerms::trapezoidal(mid, u0, v0, a0, None);
+        let mut u1 = u0.clone();
+        let (mut eval, s) = self.solve(&mut u1, &mut multipliers, Some(&terms))?;
+        stats += s;
+        let v1 = terms.velocity(&u1);
+        let (u, v, a) = match scheme {
+            TimeScheme::Trapezoidal => {
+                let a = terms.acceleration(&u1);
+                (u1, v1, a)
+            }
+            TimeScheme::Bathe => {
+                self.move_walls(&walls0, dt);
+                let terms = DynamicTerms::backward_euler3(dt, u0, &u1, v0, &v1, None);
+                let mut u2 = u1.clone();
+                // k is reset at each sub-step (SPEC §10).
+                let (e, s) = self.solve(&mut u2, &mut multipliers, Some(&terms))?;
+                eval = e;
+                stats += s;
+                let (v, a) = (terms.velocity(&u2), terms.acceleration(&u2));
+                (u2, v, a)
+            }
+        };
+        state.u = u;
+        state.v = v;
+        state.a = a;
+        state.multipliers = multipliers;
+        state.time += dt;
+        Ok((eval, stats))
+    }
+
+    /// Advances `state` by `dt`; a step that does not converge is retried as two half steps,
+    /// down to `min_sub_step` of `dt`. On failure the state and walls are those of the start.
+    pub fn step(
+        &mut self,
+        state: &mut AssemblyState,
+        dt: f64,
+        scheme: TimeScheme,
+    ) -> Result<(Evaluation, StepStats), MeshfreeError> {
+        let saved = (state.clone(), self.walls.clone());
+        match self.sub_steps(state, dt, 1.0, scheme) {
+            Ok(r) => Ok(r),
+            Err(e) => {
+                *state = saved.0;
+                self.walls = saved.1;
+                Err(e)
+            }
+        }
+    }
+
+    fn sub_steps(
+        &mut self,
+        state: &mut AssemblyState,
+        dt: f64,
+        fraction: f64,
+        scheme: TimeScheme,
+    ) -> Result<(Evaluation, StepStats), MeshfreeError> {
+        let saved = (state.clone(), self.walls.clone());
+        let walls0 = self.walls.clone();
+        match self.try_step(state, dt, scheme) {
+            Ok((eval, solve)) => {
+                self.move_walls(&walls0, dt);
+                Ok((eval, StepStats { solve, sub_steps: 1 }))
+            }
+            Err(e @ (MeshfreeError::NotConverged(_) | MeshfreeError::Singular))
+                if fraction * 0.5 >= self.min_sub_step =>
+            {
+                let _ = e;
+                *state = saved.0;
+                self.walls = saved.1;
+                let (_, mut first) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                let (eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                first.solve += second.solve;
+                first.sub_steps += second.sub_steps;
+                Ok((eval, first))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// A quasi-static solve at the walls' current positions (no inertia: rigid modes must be
+    /// held by `fixed` DoF or by contacts).
+    pub fn solve_static(
+        &mut self,
+        u: &mut Vec<f64>,
+        multipliers: &mut ContactMultipliers,
+    ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        self.solve(u, multipliers, None)
+    }
+
+    /// Kinetic energy `v^T M v / 2`.
+    pub fn kinetic_energy(&self, v: &[f64]) -> f64 {
+        let mut e = 0.0;
+        for (g, model) in self.grains.iter().enumerate() {
+            let vg = self.grain_slice(v, g);
+            let mut mv = vec![0.0; vg.len()];
+            model.pattern_mass_mul(vg, &mut mv);
+            e += 0.5 * vg.iter().zip(&mv).map(|(a, b)| a * b).sum::<f64>();
+        }
+        e
+    }
+}
+
+#[inline]
+fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
