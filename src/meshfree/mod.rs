@@ -16,6 +16,7 @@ pub mod contact;
 pub mod discretization;
 pub mod material;
 pub mod model;
+pub mod nts;
 pub mod rpim;
 pub mod solver;
 
