@@ -18,6 +18,7 @@ pub mod material;
 pub mod model;
 pub mod rpim;
 pub mod solver;
+pub mod sparse;
 
 pub use contact::{Multipliers, Wall, WallState, add_wall_contacts, contact_length};
 pub use discretization::{DiscNodes, GaussPoint, IntegrationMesh, NodeDensity};
