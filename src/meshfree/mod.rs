@@ -17,8 +17,10 @@ pub mod contact;
 pub mod discretization;
 pub mod material;
 pub mod model;
+pub mod nts;
 pub mod rpim;
 pub mod solver;
+pub mod sparse;
 
 pub use contact::{
     Multipliers, Wall, WallNodeElement, WallState, add_wall_contacts, contact_length, wall_node_element,
