@@ -1,5 +1,11 @@
 //! A scenario from start to end: generate the sample, build the box, run the loading program,
 //! write the measures.
+//!
+//! [`run_loop`] is the loop of every run, generic over the solver: it talks to it through
+//! [`Simulation`] only, and its named steps (the methods of `steps::Run`) hold everything that
+//! does not depend on the solver: wall driving, jamming detection, phase changes, stall and
+//! stop conditions, outputs, checkpoints, progress. [`Sdem`] is the SDEM engine
+//! ([`World`]) as a `Simulation`; [`run_scenario`] and [`resume_run`] start SDEM runs.
 
 pub mod bench;
 pub mod checkpoint;
@@ -328,6 +334,7 @@ pub fn run_loop<S: Simulation>(
             jammed: state.jammed(),
             ..load
         };
+        // Advance the phase when its stop condition is met (a row marks the change).
         write_row |= program.advance(sim.step_count(), sim.time(), sim.walls(), &load);
         run.check_stall(&sim, &program, &state, &load)?;
         let limit_reached = run.step_limit_reached(&sim);
@@ -407,7 +414,11 @@ pub(crate) fn log_outcome(s: &RunSummary) -> BTreeMap<String, String> {
     m
 }
 
-pub(crate) fn write_summary(path: &Path, scenario: &Scenario, s: &RunSummary) -> std::io::Result<()> {
+pub(crate) fn write_summary(
+    path: &Path,
+    scenario: &Scenario,
+    s: &RunSummary,
+) -> std::io::Result<()> {
     let mut f = std::fs::File::create(path)?;
     writeln!(f, "scenario = {}", scenario.name)?;
     writeln!(f, "grains = {}", s.grains)?;

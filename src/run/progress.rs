@@ -22,7 +22,9 @@ fn stop_fraction(
         }
         StopWhen::MeanStress(target) => (*target > 0.0).then(|| p_c / target)?,
         StopWhen::Jammed => return None,
-        StopWhen::Steps(n) => (sim.step_count() - program.phase_start_step) as f64 / (*n).max(1) as f64,
+        StopWhen::Steps(n) => {
+            (sim.step_count() - program.phase_start_step) as f64 / (*n).max(1) as f64
+        }
         StopWhen::Time(t) => (sim.time() - program.phase_start_time) / t.max(f64::MIN_POSITIVE),
         StopWhen::Strain(e) => {
             let (w0, _) = program.phase_start_size;

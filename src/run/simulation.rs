@@ -207,3 +207,216 @@ pub struct SolverStatistics {
     /// Adaptive model level only: how the steps were spent.
     pub adaptive: Option<AdaptiveStats>,
 }
+
+#[cfg(test)]
+mod tests {
+    //! A toy solver through the run loop: the seam works for something other than SDEM.
+
+    use super::*;
+    use crate::boundary::walls::{box_size, box_walls};
+    use crate::output::MacroWriter;
+    use crate::run::{RunOptions, run_loop};
+    use std::path::PathBuf;
+
+    /// Grains of fixed total area in a box whose wall stress grows linearly past phi = 0.8;
+    /// its step fails at `fail_at`. One extra column: the steps taken.
+    struct Toy {
+        walls: Vec<Wall>,
+        area: f64,
+        step: u64,
+        dt: f64,
+        fail_at: u64,
+        last_good_step: u64,
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("step {0}: the toy solver gave up")]
+    struct GaveUp(u64);
+
+    impl Toy {
+        fn phi(&self) -> f64 {
+            let (w, h) = box_size(&self.walls);
+            self.area / (w * h)
+        }
+    }
+
+    impl Simulation for Toy {
+        type Failure = GaveUp;
+        const EXTRA_COLUMNS: &'static [&'static str] = &["toy_steps"];
+
+        fn step_count(&self) -> u64 {
+            self.step
+        }
+        fn time(&self) -> f64 {
+            self.step as f64 * self.dt
+        }
+        fn dt(&self) -> f64 {
+            self.dt
+        }
+        fn grain_count(&self) -> usize {
+            1
+        }
+        fn walls(&self) -> &[Wall] {
+            &self.walls
+        }
+        fn walls_mut(&mut self) -> &mut [Wall] {
+            &mut self.walls
+        }
+        fn take_step(&mut self) -> Result<(), GaveUp> {
+            self.step += 1;
+            if self.step == self.fail_at {
+                return Err(GaveUp(self.step));
+            }
+            for w in &mut self.walls {
+                w.point += w.velocity * self.dt;
+            }
+            Ok(())
+        }
+        fn load_state(&self, jammed: bool) -> LoadState {
+            let s = (self.phi() - 0.8).max(0.0);
+            LoadState {
+                phi: self.phi(),
+                sxx: s,
+                syy: s,
+                jammed,
+                mean_diameter: 0.1,
+                density: 1.0,
+                young: 1.0,
+            }
+        }
+        fn measures(&self, phase: &str, strain_rate: f64) -> Measures {
+            let l = self.load_state(true);
+            Measures {
+                step: self.step,
+                phase: phase.into(),
+                phi: l.phi,
+                p_c: l.mean_stress(),
+                strain_rate,
+                ..Default::default()
+            }
+        }
+        fn coordination(&self) -> (f64, f64) {
+            (4.0, 4.0)
+        }
+        fn contacts(&self) -> u64 {
+            0
+        }
+        fn extra_columns(&self, row: &mut String) {
+            row.push_str(&format!(",{}", self.step));
+        }
+        fn keep_last_good(&mut self) {
+            self.last_good_step = self.step;
+        }
+        fn write_last_good(&self, path: &Path) -> std::io::Result<()> {
+            std::fs::write(path, format!("step\n{}\n", self.last_good_step))
+        }
+        fn write_grains(&self, path: &Path) -> std::io::Result<()> {
+            std::fs::write(path, "id\n0\n")
+        }
+        fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {
+            std::fs::write(path, format!("{} {}", self.step, run.state.macro_rows))
+        }
+    }
+
+    const SCENARIO: &str = r#"
+Scenario(
+    name: "toy",
+    sample: (count: 4, box_width: 1.0, box_height: 1.0,
+             radii: Gaussian(mean: 0.1, std_dev: 0.0, min: 0.1, max: 0.1)),
+    material: (young: 1.0, poisson: 0.5, density: 1.0),
+    loading: [ Isotropic(rate: Constant(1e-1), until: PackingFraction(0.9)) ],
+    output: (every: 10, jamming_pressure: 1e-2),
+)
+"#;
+
+    fn run(
+        name: &str,
+        fail_at: u64,
+        mcap: bool,
+    ) -> (Result<crate::run::RunSummary, RunError>, PathBuf) {
+        let scenario = Scenario::parse(SCENARIO, "toy.ron").unwrap();
+        let out = std::env::temp_dir().join(format!("sdem-toy-{}-{name}", std::process::id()));
+        std::fs::remove_dir_all(&out).ok();
+        std::fs::create_dir_all(&out).unwrap();
+        let toy = Toy {
+            walls: box_walls(0.0, 1.0, 0.0, 1.0),
+            area: 0.5,
+            step: 0,
+            dt: 0.01,
+            fail_at,
+            last_good_step: 0,
+        };
+        let writer =
+            MacroWriter::create_with_columns(&out.join("macro.csv"), Toy::EXTRA_COLUMNS).unwrap();
+        let program = LoadingProgram::new(scenario.loading.clone(), &toy.walls);
+        let options = RunOptions {
+            out_dir: out.clone(),
+            checkpoint_every: 100,
+            mcap: mcap.then(|| McapSettings::new(out.join("toy.mcap"))),
+            ..Default::default()
+        };
+        let result = run_loop(
+            &scenario,
+            toy,
+            program,
+            LoopState::default(),
+            writer,
+            &options,
+            None,
+        );
+        (result, out)
+    }
+
+    #[test]
+    fn a_toy_solver_runs_to_the_end_of_its_program_with_its_own_columns() {
+        let (result, out) = run("end", u64::MAX, false);
+        let summary = result.unwrap();
+        assert!(summary.last.phi >= 0.9, "{summary:?}");
+        let jamming = summary.jamming.expect("p_c passes p_jam at phi = 0.81");
+        assert!(jamming.phi > 0.81 && jamming.z == 4.0, "{jamming:?}");
+        let text = std::fs::read_to_string(out.join("macro.csv")).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(
+            lines.next().unwrap(),
+            format!("{},toy_steps", Measures::HEADER)
+        );
+        let last = lines.last().unwrap();
+        assert!(last.ends_with(&format!(",{}", summary.steps)), "{last}");
+        let checkpoint = std::fs::read_to_string(out.join("checkpoint.bin")).unwrap();
+        assert!(checkpoint.starts_with(&format!("{} ", summary.steps)));
+        assert!(out.join("grains.csv").exists() && out.join("summary.txt").exists());
+    }
+
+    #[test]
+    fn a_failed_step_reports_the_last_good_state_in_the_shape_of_an_instability() {
+        let (result, out) = run("fail", 25, false);
+        let e = result.unwrap_err();
+        let RunError::StepFailed {
+            failure,
+            last_good_step,
+            ..
+        } = &e
+        else {
+            panic!("{e:?}");
+        };
+        assert!(failure.downcast_ref::<GaveUp>().is_some());
+        assert_eq!(*last_good_step, 20);
+        let file = out.join("grains_last_good.csv");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "step 25: the toy solver gave up\n  the last good state (step 20) is in {}",
+                file.display()
+            )
+        );
+        assert_eq!(std::fs::read_to_string(file).unwrap(), "step\n20\n");
+    }
+
+    #[test]
+    fn a_solver_without_mcap_frames_refuses_a_log() {
+        let (result, _) = run("mcap", u64::MAX, true);
+        let e = result.unwrap_err();
+        assert!(matches!(e, RunError::Setup(_)), "{e:?}");
+        assert!(e.to_string().contains("does not write MCAP"), "{e}");
+    }
+}

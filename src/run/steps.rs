@@ -498,7 +498,8 @@ impl<'a> Run<'a> {
         };
         if let Some(log) = self.log.take() {
             let t = Instant::now();
-            log.finish(log_outcome(&summary)).map_err(self.log_error())?;
+            log.finish(log_outcome(&summary))
+                .map_err(self.log_error())?;
             summary.mcap_seconds += t.elapsed().as_secs_f64();
         }
         let summary_path = out.join("summary.txt");
