@@ -1,7 +1,8 @@
 //! Files a run writes: `macro.csv` (one row per output interval) and `grains.csv` (a state).
 
 use super::measures::Measures;
-use crate::integration::World;
+use crate::grain::Grain;
+use crate::integration::{GrainStress, World};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -13,8 +14,14 @@ pub struct MacroWriter {
 
 impl MacroWriter {
     pub fn create(path: &Path) -> std::io::Result<Self> {
+        Self::create_with_columns(path, &[])
+    }
+
+    /// [`MacroWriter::create`] for a solver with its own columns after the common ones (see
+    /// [`crate::run::Simulation::EXTRA_COLUMNS`]).
+    pub fn create_with_columns(path: &Path, extra: &[&str]) -> std::io::Result<Self> {
         let mut out = BufWriter::new(File::create(path)?);
-        writeln!(out, "{}", Measures::HEADER)?;
+        writeln!(out, "{}", header(extra))?;
         Ok(Self { out })
     }
 
@@ -33,6 +40,21 @@ impl MacroWriter {
         rows: u64,
         levels: Option<[u64; 3]>,
     ) -> std::io::Result<Self> {
+        Self::resume_inner(path, rows, levels, Measures::HEADER)
+    }
+
+    /// [`MacroWriter::resume`] of a `macro.csv` with a solver's own columns (see
+    /// [`MacroWriter::create_with_columns`]).
+    pub fn resume_with_columns(path: &Path, rows: u64, extra: &[&str]) -> std::io::Result<Self> {
+        Self::resume_inner(path, rows, None, &header(extra))
+    }
+
+    fn resume_inner(
+        path: &Path,
+        rows: u64,
+        levels: Option<[u64; 3]>,
+        header: &str,
+    ) -> std::io::Result<Self> {
         let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
         let bytes = std::fs::read(path)?;
         let mut end = 0usize;
@@ -41,7 +63,7 @@ impl MacroWriter {
         while lines < rows + 1 {
             match bytes[end..].iter().position(|&b| b == b'\n') {
                 Some(k) => {
-                    if lines == 0 && &bytes[..end + k] != Measures::HEADER.as_bytes() {
+                    if lines == 0 && &bytes[..end + k] != header.as_bytes() {
                         legacy = levels.is_some()
                             && &bytes[..end + k] == Measures::HEADER_WITHOUT_LEVELS.as_bytes();
                         if !legacy {
@@ -89,19 +111,44 @@ impl MacroWriter {
     }
 
     pub fn write(&mut self, row: &Measures) -> std::io::Result<()> {
-        writeln!(self.out, "{}", row.csv_row())?;
+        self.write_with(row, "")
+    }
+
+    /// Writes a row followed by a solver's own columns, `extra` (each value after a comma).
+    pub fn write_with(&mut self, row: &Measures, extra: &str) -> std::io::Result<()> {
+        writeln!(self.out, "{}{extra}", row.csv_row())?;
         self.out.flush()
     }
 }
 
+/// The header line (without its newline) with a solver's own columns after the common ones.
+fn header(extra: &[&str]) -> String {
+    let mut h = Measures::HEADER.to_string();
+    for name in extra {
+        h.push(',');
+        h.push_str(name);
+    }
+    h
+}
+
 /// One line per grain: its six DoF, radius, Love–Weber stress (tension positive) and contacts.
 pub fn write_grains_csv(path: &Path, world: &World) -> std::io::Result<()> {
+    write_grain_rows(path, &world.grains, &world.grain_stress)
+}
+
+/// [`write_grains_csv`] of given grains and stresses (one row per pair: the shorter list
+/// sets the number of rows).
+pub fn write_grain_rows(
+    path: &Path,
+    grains: &[Grain],
+    stresses: &[GrainStress],
+) -> std::io::Result<()> {
     let mut out = BufWriter::new(File::create(path)?);
     writeln!(
         out,
         "id,x,y,radius,theta,eps1,eps2,alpha,stress_xx,stress_yy,stress_xy,mean_stress_c,contacts"
     )?;
-    for (k, (g, s)) in world.grains.iter().zip(&world.grain_stress).enumerate() {
+    for (k, (g, s)) in grains.iter().zip(stresses).enumerate() {
         writeln!(
             out,
             "{k},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e},{:.9e},{:.9e},{:.9e},{:.9e},{}",

@@ -19,7 +19,7 @@
 //! the contact search is exact and the sums are taken in a fixed order, so results do not
 //! depend on them.
 
-use super::Jamming;
+use super::{Jamming, LoopState};
 use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
 use crate::grain::{Grain, GrainLevel, ModelLevel};
@@ -253,7 +253,8 @@ pub struct ProgramBits {
     pub rate: Bits,
 }
 
-/// Everything the run loop carries from one step to the next, besides the world.
+/// Everything an SDEM run carries from one step to the next, besides the world: the run loop's
+/// [`LoopState`] and the SDEM solver's last good grains and grain levels.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RunnerState {
     pub confirmed_jamming: Option<Jamming>,
@@ -269,6 +270,35 @@ pub struct RunnerState {
     /// Each grain's level at the checkpoint's step, with the adaptive model only (empty
     /// otherwise: every grain is at the scenario's level).
     pub levels: Vec<GrainLevel>,
+}
+
+impl RunnerState {
+    /// The state of a run loop with the SDEM solver's part: its last good grains and (adaptive
+    /// model only) each grain's level.
+    pub fn new(state: &LoopState, last_good: Vec<Grain>, levels: Vec<GrainLevel>) -> Self {
+        RunnerState {
+            confirmed_jamming: state.confirmed_jamming,
+            candidate: state.candidate,
+            max_loaded_inertial_number: state.max_loaded_inertial_number,
+            isotropic_curve: state.isotropic_curve.clone(),
+            last_good_step: state.last_good_step,
+            last_good,
+            macro_rows: state.macro_rows,
+            levels,
+        }
+    }
+
+    /// The run loop's part.
+    pub fn loop_state(&self) -> LoopState {
+        LoopState {
+            confirmed_jamming: self.confirmed_jamming,
+            candidate: self.candidate,
+            max_loaded_inertial_number: self.max_loaded_inertial_number,
+            isotropic_curve: self.isotropic_curve.clone(),
+            last_good_step: self.last_good_step,
+            macro_rows: self.macro_rows,
+        }
+    }
 }
 
 /// A checkpoint as stored (see the module documentation).

@@ -1,0 +1,190 @@
+//! The SDEM world as a [`Simulation`] of the run loop.
+
+use super::checkpoint::{Checkpoint, RunnerState};
+use super::simulation::{LastGood, RunRecord, Simulation, SolverStatistics};
+use super::{AdaptiveStats, RunError, open_log};
+use crate::boundary::loading::LoadState;
+use crate::boundary::walls::Wall;
+use crate::grain::Grain;
+use crate::integration::{Instability, World};
+use crate::output::files::write_grain_rows;
+use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
+use crate::output::{Measures, write_grains_csv};
+use crate::scenario::Scenario;
+use glam::DVec2;
+use std::path::Path;
+
+/// The explicit SDEM engine ([`World`]) with what a run keeps beside it: the last good grains,
+/// the constants of its measures and the adaptive-level statistics.
+pub struct Sdem {
+    pub world: World,
+    /// The grains at the last output step (reported after a failure).
+    last_good: Vec<Grain>,
+    mean_diameter: f64,
+    /// Incompressible grains keep their area pi R^2: their total is the area they need.
+    conserved_area: Option<f64>,
+    /// Counted over this process's steps only (a resumed run reports its continued part).
+    adaptive: Option<AdaptiveStats>,
+}
+
+impl Sdem {
+    /// A run of `scenario` from `world`, whose last good state is `last_good`.
+    pub fn new(world: World, scenario: &Scenario, last_good: Vec<Grain>) -> Self {
+        let mean_diameter =
+            2.0 * world.grains.iter().map(|g| g.radius).sum::<f64>() / world.grains.len() as f64;
+        let adaptive = world.params.adaptive.map(|a| AdaptiveStats {
+            dt_by_highest_level: a.dt,
+            ..Default::default()
+        });
+        let conserved_area = scenario
+            .material
+            .is_incompressible()
+            .then(|| world.grains.iter().map(Grain::reference_area).sum::<f64>());
+        Self {
+            world,
+            last_good,
+            mean_diameter,
+            conserved_area,
+            adaptive,
+        }
+    }
+}
+
+/// Index of the highest level with grains in it (0 when none).
+fn highest_level(counts: &[u64; 3]) -> usize {
+    (0..3).rev().find(|&k| counts[k] > 0).unwrap_or(0)
+}
+
+impl Simulation for Sdem {
+    type Failure = Instability;
+
+    fn step_count(&self) -> u64 {
+        self.world.step
+    }
+
+    fn time(&self) -> f64 {
+        self.world.time
+    }
+
+    fn dt(&self) -> f64 {
+        self.world.params.dt
+    }
+
+    fn grain_count(&self) -> usize {
+        self.world.grains.len()
+    }
+
+    fn walls(&self) -> &[Wall] {
+        &self.world.walls
+    }
+
+    fn walls_mut(&mut self) -> &mut [Wall] {
+        &mut self.world.walls
+    }
+
+    fn take_step(&mut self) -> Result<(), Instability> {
+        let highest_before = highest_level(&self.world.totals.level_counts);
+        self.world.step()?;
+        if let Some(stats) = self.adaptive.as_mut() {
+            stats.steps_by_highest_level[highest_before] += 1;
+            for (sum, count) in stats
+                .grain_steps_by_level
+                .iter_mut()
+                .zip(&self.world.totals.level_counts)
+            {
+                *sum += count;
+            }
+        }
+        Ok(())
+    }
+
+    fn failure_error(instability: Instability, last_good: LastGood) -> RunError {
+        RunError::Unstable {
+            instability,
+            note: last_good.note,
+            last_good_step: last_good.step,
+            state_file: last_good.state_file,
+        }
+    }
+
+    fn remap_affine(&mut self, (lo, hi): (DVec2, DVec2), (to_lo, to_hi): (DVec2, DVec2)) {
+        self.world.remap_affine(lo, hi, to_lo, to_hi);
+    }
+
+    fn load_state(&self, jammed: bool) -> LoadState {
+        Measures::load_state(&self.world, jammed, self.mean_diameter)
+    }
+
+    fn measures(&self, phase: &str, strain_rate: f64) -> Measures {
+        Measures::of(&self.world, phase, strain_rate, self.mean_diameter)
+    }
+
+    fn coordination(&self) -> (f64, f64) {
+        self.world.coordination()
+    }
+
+    fn contacts(&self) -> u64 {
+        self.world.totals.contacts
+    }
+
+    fn conserved_area(&self) -> Option<f64> {
+        self.conserved_area
+    }
+
+    fn keep_last_good(&mut self) {
+        self.last_good.clone_from(&self.world.grains);
+    }
+
+    /// The last good grains with the stresses of the current (failed) step, as sdem always
+    /// wrote them.
+    fn write_last_good(&self, path: &Path) -> std::io::Result<()> {
+        write_grain_rows(path, &self.last_good, &self.world.grain_stress)
+    }
+
+    fn write_grains(&self, path: &Path) -> std::io::Result<()> {
+        write_grains_csv(path, &self.world)
+    }
+
+    fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {
+        let world = &self.world;
+        let levels = if run.scenario.model.adaptive().is_some() {
+            world.levels().to_vec()
+        } else {
+            Vec::new()
+        };
+        Checkpoint {
+            scenario: run.scenario.clone(),
+            complete: run.complete,
+            checkpoint_every: run.checkpoint_every,
+            checkpoint_seconds: run.checkpoint_seconds,
+            step: world.step,
+            time: world.time,
+            grains: world.grains.clone(),
+            walls: world.walls.clone(),
+            totals: world.totals,
+            program: run.program.clone(),
+            runner: RunnerState::new(run.state, self.last_good.clone(), levels),
+        }
+        .write_atomic(path)
+    }
+
+    fn open_log(
+        &self,
+        settings: &McapSettings,
+        scenario: &Scenario,
+        continue_from: Option<ContinueFrom>,
+    ) -> Result<TrajectoryWriter, RunError> {
+        open_log(settings, scenario, &self.world, continue_from)
+    }
+
+    fn write_frame(&self, log: &mut TrajectoryWriter, row: &Measures) -> Result<(), WriteError> {
+        log.write_frame(&self.world, row)
+    }
+
+    fn statistics(&self) -> SolverStatistics {
+        SolverStatistics {
+            neighbor_builds: self.world.neighbors.builds,
+            adaptive: self.adaptive,
+        }
+    }
+}
