@@ -338,9 +338,10 @@ impl Problem<'_> {
 }
 
 /// Time integration schemes for the dynamic runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum TimeScheme {
     /// Bathe's composite scheme: trapezoidal rule on dt/2, then 3-point backward Euler.
+    #[default]
     Bathe,
     /// Plain Newmark trapezoidal rule (average acceleration) on dt.
     Trapezoidal,

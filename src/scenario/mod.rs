@@ -15,6 +15,7 @@ use crate::grain::Grain;
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
 use crate::integration::parameters::{Adaptive, critical_time_step};
+use crate::meshfree::{HyperelasticLaw, SolverSettings, TimeScheme};
 use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
 use crate::sample::{MAX_COUNT, RadiusDistribution, SampleError, SampleSpec};
 use serde::{Deserialize, Serialize};
@@ -46,6 +47,9 @@ pub struct Scenario {
     pub loading: Vec<Phase>,
     #[serde(default)]
     pub output: OutputSettings,
+    /// Body force per unit mass (meshfree model only), e.g. `(0.0, -9.81)`.
+    #[serde(default, skip_serializing_if = "is_zero_origin")]
+    pub gravity: (f64, f64),
 }
 
 fn default_seed() -> u64 {
@@ -71,6 +75,9 @@ pub struct SampleSettings {
     /// A CSV of grains (see [`crate::sample::file`]), relative to the scenario file's folder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<PathBuf>,
+    /// The grains' contours (meshfree model only; default: discs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shapes: Option<GrainShapes>,
     /// The grains of `file` once read ([`Scenario::load`], [`Scenario::load_sample`]; a
     /// checkpoint sets the radii of its grains). Not part of the scenario's text.
     #[serde(skip)]
@@ -108,6 +115,7 @@ impl PartialEq for SampleSettings {
             && self.origin.1.to_bits() == other.origin.1.to_bits()
             && self.radii == other.radii
             && self.file == other.file
+            && self.shapes == other.shapes
     }
 }
 
@@ -246,6 +254,9 @@ pub enum Model {
     /// Level 3: all six degrees of freedom.
     #[default]
     Full,
+    /// The meshfree multibody solver (SPEC §10, §10b): every grain resolved by field nodes,
+    /// implicit dynamics. `Meshfree()` takes the defaults of [`MeshfreeSettings`].
+    Meshfree(MeshfreeSettings),
     /// Each grain moves between the three by its contact stress (see
     /// [`crate::grain::adaptive`]); every field is optional, the defaults are those of
     /// [`AdaptiveSettings::default`]. `Adaptive()` takes them all.
@@ -327,7 +338,7 @@ impl Model {
         match self {
             Model::Rigid => ModelLevel::Rigid,
             Model::Volumetric => ModelLevel::Volumetric,
-            Model::Full | Model::Adaptive { .. } => ModelLevel::Full,
+            Model::Full | Model::Adaptive { .. } | Model::Meshfree(_) => ModelLevel::Full,
         }
     }
 }
@@ -340,6 +351,80 @@ impl From<ModelLevel> for Model {
             ModelLevel::Full => Model::Full,
         }
     }
+}
+
+/// Settings of the meshfree multibody solver (SPEC §10, §10b). Lengths and stiffnesses are
+/// relative to the sample's mean grain radius `R` and to `E`, so that one setting serves any
+/// sample size.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MeshfreeSettings {
+    /// Field nodes on each grain's contour (the nodal density: interior nodes follow at the
+    /// contour's spacing, graded inward). For discs it is rounded up to a multiple of 4.
+    pub boundary_nodes: usize,
+    /// Interior spacing grows from the contour's to `(1 + grading)` times it at the centre.
+    pub grading: f64,
+    pub law: HyperelasticLaw,
+    pub scheme: TimeScheme,
+    /// Initial contact stiffness k0, in units of `E / R` (reset at each sub-step).
+    pub k0: f64,
+    /// Factor on the contact stiffness at each augmentation.
+    pub alpha_k: f64,
+    /// The augmentations stop when every active contact's |gap| is below this, in units of R.
+    pub gap_tolerance: f64,
+    /// Newton stops when every residual component is below this, in units of `E R`.
+    pub force_tolerance: f64,
+    pub max_newton: usize,
+    pub max_augmentations: usize,
+    /// Rayleigh damping `C = alpha M + beta K_i0`: alpha (1/time) and beta (time).
+    pub rayleigh_alpha: f64,
+    pub rayleigh_beta: f64,
+    /// Smallest sub-step a step that does not converge is cut into (a fraction of dt).
+    pub min_sub_step: f64,
+}
+
+impl Default for MeshfreeSettings {
+    fn default() -> Self {
+        Self {
+            boundary_nodes: 32,
+            grading: 1.0,
+            law: HyperelasticLaw::NeoHookean,
+            scheme: TimeScheme::Bathe,
+            k0: 1.0,
+            alpha_k: 2.0,
+            gap_tolerance: 1e-5,
+            force_tolerance: 1e-10,
+            max_newton: 30,
+            max_augmentations: 40,
+            rayleigh_alpha: 0.0,
+            rayleigh_beta: 0.0,
+            min_sub_step: 1.0 / 16.0,
+        }
+    }
+}
+
+impl MeshfreeSettings {
+    /// The solver's absolute settings for a sample of mean radius `mean_radius`.
+    pub fn solver(&self, young: f64, mean_radius: f64) -> SolverSettings {
+        SolverSettings {
+            k0: self.k0 * young / mean_radius,
+            alpha_k: self.alpha_k,
+            gap_tolerance: self.gap_tolerance * mean_radius,
+            force_tolerance: self.force_tolerance * young * mean_radius,
+            max_newton: self.max_newton,
+            max_augmentations: self.max_augmentations,
+        }
+    }
+}
+
+/// The contours of the grains (meshfree solver only; SDEM grains are discs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum GrainShapes {
+    /// Discs of the sample's radii.
+    Discs,
+    /// "Sand-like" contours: random Fourier shape descriptors about each grain's radius
+    /// (SPEC §10b), seeded by the scenario's seed.
+    SandLike,
 }
 
 /// What to do when a contact leaves the domain of the secant law (SPEC §5).
