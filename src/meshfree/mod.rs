@@ -16,7 +16,9 @@ pub mod contact;
 pub mod discretization;
 pub mod material;
 pub mod model;
+pub mod packing;
 pub mod rpim;
+pub mod shape;
 pub mod solver;
 
 pub use contact::{Multipliers, Wall, WallState, add_wall_contacts, contact_length};
