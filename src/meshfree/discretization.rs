@@ -349,7 +349,8 @@ mod tests {
         let star = StarShape::Polygon { vertices };
         let nodes = place_nodes(&star, 0.1, 1.0).unwrap();
         let exact = polygon_area(nodes.boundary());
-        let mesh = IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+        let mesh =
+            IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
         let wsum: f64 = mesh.gauss_points.iter().map(|g| g.weight).sum();
         assert!((wsum - exact).abs() < 1e-12, "{wsum} vs {exact}");
         assert!((mesh.area - exact).abs() < 1e-12);
@@ -357,10 +358,14 @@ mod tests {
         assert!(hull.area > exact + 0.3, "{} vs {exact}", hull.area);
         // Every node is used by some triangle.
         let mut used = vec![false; nodes.len()];
-        mesh.triangles.iter().flatten().for_each(|&i| used[i] = true);
+        mesh.triangles
+            .iter()
+            .flatten()
+            .for_each(|&i| used[i] = true);
         assert!(used.iter().all(|&u| u));
         // Deterministic.
-        let again = IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+        let again =
+            IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
         assert_eq!(mesh.triangles, again.triangles);
 
         // Convex node set (disc): the same area as plain Delaunay.

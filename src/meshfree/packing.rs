@@ -83,7 +83,12 @@ pub(crate) fn polygons_apart(
     }
     // Only edges that reach into the other polygon's box (grown by the gap) can be close.
     let near = |p: [f64; 2], q: [f64; 2], o: &[f64; 4]| {
-        let e = [p[0].min(q[0]), p[1].min(q[1]), p[0].max(q[0]), p[1].max(q[1])];
+        let e = [
+            p[0].min(q[0]),
+            p[1].min(q[1]),
+            p[0].max(q[0]),
+            p[1].max(q[1]),
+        ];
         !boxes_apart(&e, o, gap)
     };
     let edges = |poly: &[[f64; 2]], other: &[f64; 4]| -> Vec<([f64; 2], [f64; 2], [f64; 4])> {
@@ -91,7 +96,18 @@ pub(crate) fn polygons_apart(
         (0..n)
             .map(|i| (poly[i], poly[(i + 1) % n]))
             .filter(|&(p, q)| near(p, q, other))
-            .map(|(p, q)| (p, q, [p[0].min(q[0]), p[1].min(q[1]), p[0].max(q[0]), p[1].max(q[1])]))
+            .map(|(p, q)| {
+                (
+                    p,
+                    q,
+                    [
+                        p[0].min(q[0]),
+                        p[1].min(q[1]),
+                        p[0].max(q[0]),
+                        p[1].max(q[1]),
+                    ],
+                )
+            })
             .collect()
     };
     let ea = edges(a, bb);
@@ -264,7 +280,7 @@ mod tests {
         let contours: Vec<Vec<[f64; 2]>> = shapes
             .iter()
             .zip(placed)
-            .map(|(s, g)| fine_contour(s, g, 2048))
+            .map(|(s, g)| fine_contour(s, g, 1024))
             .collect();
         for c in &contours {
             for p in c {
@@ -325,8 +341,16 @@ mod tests {
         assert_ne!(a, place_grains(&shapes, bounds, gap, 12).unwrap());
 
         // The overlap test itself: two squares, apart, closer than the gap, overlapping, nested.
-        let sq = |x: f64, y: f64, h: f64| vec![[x - h, y - h], [x + h, y - h], [x + h, y + h], [x - h, y + h]];
-        let t = |a: &[[f64; 2]], b: &[[f64; 2]], g: f64| polygons_apart(a, &bbox(a), b, &bbox(b), g);
+        let sq = |x: f64, y: f64, h: f64| {
+            vec![
+                [x - h, y - h],
+                [x + h, y - h],
+                [x + h, y + h],
+                [x - h, y + h],
+            ]
+        };
+        let t =
+            |a: &[[f64; 2]], b: &[[f64; 2]], g: f64| polygons_apart(a, &bbox(a), b, &bbox(b), g);
         assert!(t(&sq(0.0, 0.0, 1.0), &sq(2.5, 0.3, 0.4), 0.1));
         assert!(!t(&sq(0.0, 0.0, 1.0), &sq(1.45, 0.3, 0.4), 0.1));
         assert!(!t(&sq(0.0, 0.0, 1.0), &sq(1.2, 0.9, 0.4), 0.0));
@@ -336,9 +360,16 @@ mod tests {
     #[test]
     fn impossible_packing_fails_clearly() {
         let shapes = vec![StarShape::Disc { radius: 1.0 }; 10];
-        let e = place_grains(&shapes, [0.0, 4.0, 0.0, 4.0], 0.0, 1).unwrap_err().to_string();
-        assert!(e.contains("could not place grain") && e.contains("packing fraction"), "{e}");
-        let e = place_grains(&shapes, [0.0, -1.0, 0.0, 4.0], 0.0, 1).unwrap_err().to_string();
+        let e = place_grains(&shapes, [0.0, 4.0, 0.0, 4.0], 0.0, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("could not place grain") && e.contains("packing fraction"),
+            "{e}"
+        );
+        let e = place_grains(&shapes, [0.0, -1.0, 0.0, 4.0], 0.0, 1)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("bounds"), "{e}");
         assert!(place_grains(&shapes, [0.0, 40.0, 0.0, 40.0], -0.1, 1).is_err());
     }
@@ -356,12 +387,12 @@ mod tests {
         let t_place = started.elapsed();
         check_sample(&shapes, &placed, bounds, 0.02);
         let t_check = started.elapsed();
-        let spacing = 0.18;
+        let spacing = 0.17;
         let mut counts = Vec::new();
         for s in &shapes {
             let nodes = place_nodes(s, spacing, 1.0).unwrap();
-            let mesh = IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count)
-                .unwrap();
+            let mesh =
+                IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
             assert!((mesh.area - polygon_area(nodes.boundary())).abs() < 1e-12);
             counts.push(nodes.len());
         }

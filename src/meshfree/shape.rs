@@ -90,9 +90,15 @@ pub(crate) enum PolygonDefect {
     NonFinite(usize),
     Duplicate(usize),
     Clockwise,
-    Crossing { e1: usize, e2: usize, at: [f64; 2] },
+    Crossing {
+        e1: usize,
+        e2: usize,
+        at: [f64; 2],
+    },
     /// Vertex `i + 1` is not strictly counter-clockwise of vertex `i` as seen from the origin.
-    NotStar { i: usize },
+    NotStar {
+        i: usize,
+    },
     /// The angles go around the origin more than once (or the origin is outside).
     Winding(f64),
 }
@@ -170,6 +176,10 @@ pub fn polygon_centroid(v: &[[f64; 2]]) -> [f64; 2] {
 }
 
 /// Intersection point of segments `ab` and `cd` if they touch or cross.
+///
+/// Orientation tests with a tolerance relative to the segments' size: nearly collinear
+/// segments (consecutive nodes along a straight polygon edge, whose cross products are
+/// rounding noise) are handled as collinear, so they are reported only if they overlap.
 pub(crate) fn segment_intersection(
     a: [f64; 2],
     b: [f64; 2],
@@ -178,27 +188,40 @@ pub(crate) fn segment_intersection(
 ) -> Option<[f64; 2]> {
     let r = sub(b, a);
     let s = sub(d, c);
-    let denom = cross(r, s);
-    let ac = sub(c, a);
-    if denom == 0.0 {
-        // Parallel: overlapping collinear segments touch.
-        if cross(ac, r) != 0.0 {
-            return None;
+    let size = norm(r).max(norm(s)).max(norm(sub(c, a)));
+    let tol = 1e-12 * size * size;
+    let sign = |x: f64| {
+        if x > tol {
+            1
+        } else if x < -tol {
+            -1
+        } else {
+            0
         }
-        let rr = r[0] * r[0] + r[1] * r[1];
-        let t0 = (ac[0] * r[0] + ac[1] * r[1]) / rr;
-        let t1 = t0 + (s[0] * r[0] + s[1] * r[1]) / rr;
-        let (lo, hi) = (t0.min(t1), t0.max(t1));
-        if hi < 0.0 || lo > 1.0 {
-            return None;
-        }
-        let t = lo.max(0.0);
+    };
+    let o1 = sign(cross(r, sub(c, a)));
+    let o2 = sign(cross(r, sub(d, a)));
+    let o3 = sign(cross(s, sub(a, c)));
+    let o4 = sign(cross(s, sub(b, c)));
+    if o1 * o2 < 0 && o3 * o4 < 0 {
+        let t = cross(sub(c, a), s) / cross(r, s);
         return Some([a[0] + t * r[0], a[1] + t * r[1]]);
     }
-    let t = cross(ac, s) / denom;
-    let u = cross(ac, r) / denom;
-    if (0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u) {
-        Some([a[0] + t * r[0], a[1] + t * r[1]])
+    let slack = 1e-12 * size;
+    let on = |p: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        p[0] >= a[0].min(b[0]) - slack
+            && p[0] <= a[0].max(b[0]) + slack
+            && p[1] >= a[1].min(b[1]) - slack
+            && p[1] <= a[1].max(b[1]) + slack
+    };
+    if o1 == 0 && on(c, a, b) {
+        Some(c)
+    } else if o2 == 0 && on(d, a, b) {
+        Some(d)
+    } else if o3 == 0 && on(a, c, d) {
+        Some(a)
+    } else if o4 == 0 && on(b, c, d) {
+        Some(b)
     } else {
         None
     }
@@ -227,7 +250,10 @@ pub(crate) fn polygon_defect(v: &[[f64; 2]]) -> Option<PolygonDefect> {
     if n < 3 {
         return Some(PolygonDefect::TooFew(n));
     }
-    if let Some(i) = v.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
+    if let Some(i) = v
+        .iter()
+        .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+    {
         return Some(PolygonDefect::NonFinite(i));
     }
     if let Some(i) = (0..n).find(|&i| v[i] == v[(i + n - 1) % n]) {
@@ -245,7 +271,7 @@ pub(crate) fn polygon_defect(v: &[[f64; 2]]) -> Option<PolygonDefect> {
         let c = cross(a, b);
         // A vertex at the centre, or an edge through it, is not "strictly visible" either.
         let scale = norm(a) * norm(b);
-        if !(c > 1e-12 * scale) {
+        if c <= 1e-12 * scale {
             return Some(PolygonDefect::NotStar { i });
         }
         turn += c.atan2(a[0] * b[0] + a[1] * b[1]);
@@ -398,7 +424,9 @@ impl StarShape {
         match self {
             Self::Disc { .. } => [0.0, 0.0],
             Self::Polygon { vertices } => polygon_centroid(vertices),
-            Self::Fourier { modes, .. } => polygon_centroid(&self.outline(smooth_resolution(modes))),
+            Self::Fourier { modes, .. } => {
+                polygon_centroid(&self.outline(smooth_resolution(modes)))
+            }
         }
     }
 
@@ -873,8 +901,13 @@ pub fn parse_shapes(text: &str, name: &str) -> Result<Vec<([f64; 2], StarShape)>
                 _ => b.line,
             };
             let lines = &b.lines;
-            let msg = d.describe(vertices.len(), &|i| format!("the vertex on line {}", lines[i]));
-            return Err(err(line, format!("grain {} (line {}): {msg}", b.id, b.line)));
+            let msg = d.describe(vertices.len(), &|i| {
+                format!("the vertex on line {}", lines[i])
+            });
+            return Err(err(
+                line,
+                format!("grain {} (line {}): {msg}", b.id, b.line),
+            ));
         }
         out.push((centre, shape));
     }
@@ -1204,7 +1237,11 @@ mod tests {
         assert!((sq.area() - 2.0).abs() < 1e-15);
         let f = sample_fourier();
         let exact = PI * 1.69 * (1.0 + 0.5 * (0.08f64.powi(2) + 0.04f64.powi(2) + 0.02f64.powi(2)));
-        assert!((f.area() - exact).abs() < 1e-13 * exact, "{} vs {exact}", f.area());
+        assert!(
+            (f.area() - exact).abs() < 1e-13 * exact,
+            "{} vs {exact}",
+            f.area()
+        );
         // A fine polygon of the contour agrees too (independent check of the formula).
         let poly = polygon_area(&f.outline(20000));
         assert!((poly - exact).abs() < 1e-6 * exact);
@@ -1215,6 +1252,19 @@ mod tests {
         let s = star_polygon();
         let sr = s.rotated(0.4);
         assert!((sr.radius_at(0.5) - s.radius_at(0.1)).abs() < 1e-13);
+    }
+
+    #[test]
+    fn segment_intersection_is_robust_for_collinear_chains() {
+        // Nodes along a slanted straight edge: rounding makes them not exactly collinear, but
+        // disjoint pieces of the edge must not be reported as touching.
+        let (a, b) = ([0.45f64 * 0.3f64.cos(), 0.2], [-0.139_058, -0.427_975]);
+        let at = |t: f64| [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+        assert!(segment_intersection(at(0.0), at(0.25), at(0.5), at(0.75)).is_none());
+        assert!(segment_intersection(at(0.0), at(0.5), at(0.25), at(0.75)).is_some());
+        assert!(segment_intersection([0.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.0, 0.0]).is_some());
+        assert!(segment_intersection([0.0, 0.0], [1.0, 0.0], [0.5, 0.0], [0.5, 1.0]).is_some());
+        assert!(segment_intersection([0.0, 0.0], [1.0, 0.0], [0.5, 1e-9], [0.5, 1.0]).is_none());
     }
 
     #[test]
@@ -1242,7 +1292,10 @@ mod tests {
         };
         let e = bow.validate().unwrap_err().to_string();
         assert!(e.contains("self-intersecting"), "{e}");
-        assert!(e.contains("edge vertex 0→vertex 1 crosses edge vertex 2→vertex 3"), "{e}");
+        assert!(
+            e.contains("edge vertex 0→vertex 1 crosses edge vertex 2→vertex 3"),
+            "{e}"
+        );
         // A C shape around the origin: simple, but the vertices are not angularly ordered about
         // the origin (the inner arc goes clockwise).
         let mut c = Vec::new();
@@ -1273,7 +1326,14 @@ mod tests {
         };
         let e = neg.validate().unwrap_err().to_string();
         assert!(e.contains("not positive"), "{e}");
-        assert!(StarShape::Fourier { r0: -1.0, modes: vec![] }.validate().is_err());
+        assert!(
+            StarShape::Fourier {
+                r0: -1.0,
+                modes: vec![]
+            }
+            .validate()
+            .is_err()
+        );
         assert!(StarShape::Disc { radius: 0.0 }.validate().is_err());
         // NaN.
         assert!(StarShape::Disc { radius: f64::NAN }.validate().is_err());
@@ -1294,7 +1354,12 @@ mod tests {
         let two = StarShape::Polygon {
             vertices: vec![[1.0, 0.0], [0.0, 1.0]],
         };
-        assert!(two.validate().unwrap_err().to_string().contains("at least 3"));
+        assert!(
+            two.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("at least 3")
+        );
     }
 
     #[test]
@@ -1336,9 +1401,13 @@ mod tests {
                 panic!("a polygon")
             };
             let off = polygon_centroid(&s0.outline(64));
-            assert!((c1[0] - c0[0] - off[0]).abs() < 1e-12 && (c1[1] - c0[1] - off[1]).abs() < 1e-12);
+            assert!(
+                (c1[0] - c0[0] - off[0]).abs() < 1e-12 && (c1[1] - c0[1] - off[1]).abs() < 1e-12
+            );
             for (a, b) in s0.outline(64).iter().zip(vertices) {
-                assert!((a[0] - off[0] - b[0]).abs() < 1e-12 && (a[1] - off[1] - b[1]).abs() < 1e-12);
+                assert!(
+                    (a[0] - off[0] - b[0]).abs() < 1e-12 && (a[1] - off[1] - b[1]).abs() < 1e-12
+                );
             }
             assert!((s1.area() - polygon_area(&s0.outline(64))).abs() < 1e-12);
         }
@@ -1348,15 +1417,26 @@ mod tests {
         assert!(e.starts_with("f.txt:8:") && e.contains("`x`"), "{e}");
         let text = "grain a\n0 0\n1 0\n0 1\ngrain b  # two vertices\n0 0\n1 0\n";
         let e = parse_shapes(text, "f.txt").unwrap_err().to_string();
-        assert!(e.starts_with("f.txt:5:") && e.contains("grain b has 2 vertices"), "{e}");
+        assert!(
+            e.starts_with("f.txt:5:") && e.contains("grain b has 2 vertices"),
+            "{e}"
+        );
         let text = "0 0\n";
         let e = parse_shapes(text, "f.txt").unwrap_err().to_string();
         assert!(e.starts_with("f.txt:1:") && e.contains("grain"), "{e}");
         let text = "grain\n1 2 3\n";
-        assert!(parse_shapes(text, "f.txt").unwrap_err().to_string().starts_with("f.txt:2:"));
+        assert!(
+            parse_shapes(text, "f.txt")
+                .unwrap_err()
+                .to_string()
+                .starts_with("f.txt:2:")
+        );
         let text = "grain bow\n0 0\n2 2\n2 0\n0 2\n";
         let e = parse_shapes(text, "f.txt").unwrap_err().to_string();
-        assert!(e.contains("grain bow") && e.contains("self-intersecting"), "{e}");
+        assert!(
+            e.contains("grain bow") && e.contains("self-intersecting"),
+            "{e}"
+        );
         assert!(e.contains("line 2") && e.contains("line 4"), "{e}");
         // Clockwise input is accepted (reversed), the closing vertex dropped.
         let text = "grain\n0 0\n0 1\n1 1\n1 0\n0 0\n";
@@ -1364,7 +1444,9 @@ mod tests {
         assert_eq!(g[0].0, [0.5, 0.5]);
         assert!((g[0].1.area() - 1.0).abs() < 1e-15);
         // Missing file.
-        let e = read_shape_file(&dir.join("missing.txt")).unwrap_err().to_string();
+        let e = read_shape_file(&dir.join("missing.txt"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing.txt"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
@@ -1377,7 +1459,10 @@ mod tests {
             let t = p[1].atan2(p[0]);
             let r = shape.radius_at(t);
             if i < nb {
-                assert!((norm(*p) - r).abs() < 1e-12, "boundary node {i} off the contour");
+                assert!(
+                    (norm(*p) - r).abs() < 1e-12,
+                    "boundary node {i} off the contour"
+                );
             } else {
                 assert!(norm(*p) < r - 0.3 * spacing, "interior node {i} not inside");
             }
@@ -1456,5 +1541,54 @@ mod tests {
         let fine = check_nodes(&s, 0.05, 1.0);
         let ratio = fine.len() as f64 / nodes.len() as f64;
         assert!((3.0..4.8).contains(&ratio), "ratio {ratio}");
+    }
+
+    /// The nodes serve their purpose: RPIM supports built on them reproduce a quadratic field
+    /// at every Gauss point of the inside mesh (a badly placed or clustered node set shows up
+    /// as a singular or ill-conditioned moment matrix here).
+    #[test]
+    fn rpim_on_grain_nodes_reproduces_quadratics() {
+        use crate::meshfree::discretization::IntegrationMesh;
+        use crate::meshfree::rpim::Rpim;
+        let mut shapes = sand_like_sample(4, 1.0, 0.2, 5);
+        shapes.push(star_polygon());
+        for shape in &shapes {
+            let nodes = place_nodes(shape, 0.17, 1.0).unwrap();
+            let mesh =
+                IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+            let rpim = Rpim::new(&nodes.positions).unwrap();
+            let f = |p: [f64; 2]| 1.0 + 2.0 * p[0] - p[1] + p[0] * p[0] + 0.5 * p[0] * p[1];
+            for g in &mesh.gauss_points {
+                let sf = rpim.shape_functions(g.position).unwrap();
+                let (v, dx, dy) = sf.interpolate(|j| f(nodes.positions[j]));
+                let [x, y] = g.position;
+                assert!((v - f(g.position)).abs() < 1e-8, "value at {x}, {y}");
+                assert!((dx - (2.0 + 2.0 * x + 0.5 * y)).abs() < 1e-6);
+                assert!((dy - (-1.0 + 0.5 * x)).abs() < 1e-6);
+            }
+        }
+    }
+
+    /// Writes node sets and meshes for a visual check (`cargo test ... dump -- --ignored`).
+    #[test]
+    #[ignore]
+    fn dump_nodes_for_inspection() {
+        use crate::meshfree::discretization::IntegrationMesh;
+        let mut shapes = sand_like_sample(3, 1.0, 0.2, 5);
+        shapes.push(star_polygon());
+        shapes.push(StarShape::Disc { radius: 1.0 });
+        let mut out = String::new();
+        for (k, shape) in shapes.iter().enumerate() {
+            let nodes = place_nodes(shape, 0.17, 1.0).unwrap();
+            let mesh =
+                IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+            for p in &nodes.positions {
+                let _ = writeln!(out, "n {k} {} {}", p[0], p[1]);
+            }
+            for t in &mesh.triangles {
+                let _ = writeln!(out, "t {k} {} {} {}", t[0], t[1], t[2]);
+            }
+        }
+        std::fs::write("/tmp/sdem_nodes.txt", out).unwrap();
     }
 }
