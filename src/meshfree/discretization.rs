@@ -1,6 +1,6 @@
 //! Field nodes of a disc, the integration triangulation and its Gauss points (SPEC §10).
 
-use spade::{DelaunayTriangulation, Point2, Triangulation};
+use spade::{ConstrainedDelaunayTriangulation, DelaunayTriangulation, Point2, Triangulation};
 
 use super::MeshfreeError;
 
@@ -181,6 +181,129 @@ impl IntegrationMesh {
     }
 }
 
+impl IntegrationMesh {
+    /// Triangulation of the field nodes restricted to the inside of the boundary polygon
+    /// (nodes `0..boundary_count`, counter-clockwise), with 6 Gauss points per triangle as in
+    /// [`delaunay`](Self::delaunay).
+    ///
+    /// Why: a plain Delaunay triangulation covers the convex hull, so for a non-convex grain it
+    /// would integrate over the empty bays of the contour. Here the boundary edges are
+    /// constraints of a constrained Delaunay triangulation and only the triangles inside the
+    /// boundary polygon are kept (every triangle is either wholly inside or wholly outside, so
+    /// its centroid decides). For a convex node set this gives the same area as `delaunay`.
+    /// Triangles are listed with sorted vertex indices, in sorted order (deterministic).
+    ///
+    /// Fails (`BadInput`) if the boundary polygon self-intersects or is clockwise, if nodes
+    /// coincide, or if a node lies outside the boundary polygon (it would carry no Gauss point).
+    pub fn inside_boundary(
+        positions: &[[f64; 2]],
+        boundary_count: usize,
+    ) -> Result<Self, MeshfreeError> {
+        use super::shape::{first_crossing, point_in_polygon, polygon_area};
+        if boundary_count < 3 || boundary_count > positions.len() {
+            return Err(MeshfreeError::BadInput(format!(
+                "boundary_count must be in 3..={}, got {boundary_count}",
+                positions.len()
+            )));
+        }
+        if positions
+            .iter()
+            .any(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(MeshfreeError::BadInput("non-finite node position".into()));
+        }
+        let boundary = &positions[..boundary_count];
+        if let Some((e1, e2, at)) = first_crossing(boundary) {
+            return Err(MeshfreeError::BadInput(format!(
+                "boundary polygon self-intersects: edge {e1}-{} and edge {e2}-{} meet at \
+                 ({:.6}, {:.6})",
+                (e1 + 1) % boundary_count,
+                (e2 + 1) % boundary_count,
+                at[0],
+                at[1]
+            )));
+        }
+        if polygon_area(boundary) <= 0.0 {
+            return Err(MeshfreeError::BadInput(
+                "boundary nodes must be counter-clockwise (the polygon has area <= 0)".into(),
+            ));
+        }
+        if let Some(i) =
+            (boundary_count..positions.len()).find(|&i| !point_in_polygon(positions[i], boundary))
+        {
+            return Err(MeshfreeError::BadInput(format!(
+                "interior node {i} at ({:.6}, {:.6}) is not inside the boundary polygon",
+                positions[i][0], positions[i][1]
+            )));
+        }
+        let points: Vec<Point2<f64>> = positions.iter().map(|p| Point2::new(p[0], p[1])).collect();
+        let edges: Vec<[usize; 2]> = (0..boundary_count)
+            .map(|i| [i, (i + 1) % boundary_count])
+            .collect();
+        let mut conflicts = 0usize;
+        let cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::try_bulk_load_cdt(
+            points,
+            edges,
+            |_| conflicts += 1,
+        )
+        .map_err(|e| MeshfreeError::BadInput(format!("triangulation failed: {e:?}")))?;
+        if cdt.num_vertices() != positions.len() {
+            return Err(MeshfreeError::BadInput(
+                "triangulation dropped duplicate field nodes".into(),
+            ));
+        }
+        if conflicts > 0 {
+            return Err(MeshfreeError::BadInput(format!(
+                "{conflicts} boundary edges could not be constrained (a node lies on the contour \
+                 between two boundary nodes?)"
+            )));
+        }
+        let mut triangles = Vec::with_capacity(cdt.num_inner_faces());
+        for face in cdt.inner_faces() {
+            let v = face.vertices();
+            let t = [v[0].fix().index(), v[1].fix().index(), v[2].fix().index()];
+            let c = [0, 1].map(|k| t.iter().map(|&i| positions[i][k]).sum::<f64>() / 3.0);
+            if point_in_polygon(c, boundary) {
+                triangles.push(t);
+            }
+        }
+        for t in &mut triangles {
+            t.sort_unstable();
+        }
+        triangles.sort_unstable();
+        Ok(Self::with_gauss_points(positions, triangles))
+    }
+
+    /// Gauss points of a list of triangles; zero-area slivers (collinear nodes) are skipped.
+    fn with_gauss_points(positions: &[[f64; 2]], triangles: Vec<[usize; 3]>) -> Self {
+        let mut gauss_points = Vec::with_capacity(6 * triangles.len());
+        let mut area = 0.0;
+        for t in &triangles {
+            let [a, b, c] = t.map(|i| positions[i]);
+            let tri_area =
+                0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])).abs();
+            if tri_area <= 1e-14 * (1.0 + area) {
+                continue;
+            }
+            area += tri_area;
+            for (bary, w) in GAUSS6 {
+                gauss_points.push(GaussPoint {
+                    position: [
+                        bary[0] * a[0] + bary[1] * b[0] + bary[2] * c[0],
+                        bary[0] * a[1] + bary[1] * b[1] + bary[2] * c[1],
+                    ],
+                    weight: w * tri_area,
+                });
+            }
+        }
+        Self {
+            triangles,
+            gauss_points,
+            area,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -210,5 +333,51 @@ mod tests {
         );
         let wsum: f64 = mesh.gauss_points.iter().map(|g| g.weight).sum();
         assert!((wsum - polygon).abs() < 1e-12);
+    }
+
+    #[test]
+    fn inside_boundary_covers_only_the_grain() {
+        use crate::meshfree::shape::{StarShape, place_nodes, polygon_area};
+        // A non-convex star: plain Delaunay fills the convex hull, inside_boundary the star.
+        let vertices: Vec<[f64; 2]> = (0..10)
+            .map(|k| {
+                let t = std::f64::consts::PI * k as f64 / 5.0;
+                let r = if k % 2 == 0 { 1.0 } else { 0.45 };
+                [r * t.cos(), r * t.sin()]
+            })
+            .collect();
+        let star = StarShape::Polygon { vertices };
+        let nodes = place_nodes(&star, 0.1, 1.0).unwrap();
+        let exact = polygon_area(nodes.boundary());
+        let mesh =
+            IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+        let wsum: f64 = mesh.gauss_points.iter().map(|g| g.weight).sum();
+        assert!((wsum - exact).abs() < 1e-12, "{wsum} vs {exact}");
+        assert!((mesh.area - exact).abs() < 1e-12);
+        let hull = IntegrationMesh::delaunay(&nodes.positions).unwrap();
+        assert!(hull.area > exact + 0.3, "{} vs {exact}", hull.area);
+        // Every node is used by some triangle.
+        let mut used = vec![false; nodes.len()];
+        mesh.triangles
+            .iter()
+            .flatten()
+            .for_each(|&i| used[i] = true);
+        assert!(used.iter().all(|&u| u));
+        // Deterministic.
+        let again =
+            IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count).unwrap();
+        assert_eq!(mesh.triangles, again.triangles);
+
+        // Convex node set (disc): the same area as plain Delaunay.
+        let disc = DiscNodes::disc(0.5, NodeDensity::new(32)).unwrap();
+        let a = IntegrationMesh::inside_boundary(&disc.positions, disc.boundary_count).unwrap();
+        let b = IntegrationMesh::delaunay(&disc.positions).unwrap();
+        assert!((a.area - b.area).abs() < 1e-12);
+        assert_eq!(a.gauss_points.len(), b.gauss_points.len());
+
+        // A node outside the boundary is refused.
+        let mut bad = nodes.positions.clone();
+        bad.push([0.9, 0.5]);
+        assert!(IntegrationMesh::inside_boundary(&bad, nodes.boundary_count).is_err());
     }
 }

@@ -1,16 +1,18 @@
 //! Meshfree reference solver (MELODY-like, SPEC §10): RPIM shape functions, total-Lagrangian
 //! hyperelasticity, wall contact with augmented Lagrangian, quasi-static and dynamic stepping.
 //!
-//! One grain at a time (dense linear algebra): field nodes of a disc on concentric rings
-//! ([`DiscNodes`]), a Delaunay integration mesh with 6 Gauss points per triangle
-//! ([`IntegrationMesh`]), RPIM shape functions with supports of 20 neighbours ([`Rpim`]),
-//! plane-strain neo-Hookean or Saint Venant–Kirchhoff material ([`Hyperelastic`]), internal
-//! forces, tangent and consistent mass ([`DiscModel`]), frictionless rigid walls
-//! ([`Wall`], appendix C), Newton nested in augmented-Lagrangian loops ([`Problem`]) and the
-//! Bathe composite / trapezoidal dynamic schemes ([`Dynamics`]).
+//! Field nodes of a disc on concentric rings ([`DiscNodes`]) or of any star-shaped contour
+//! ([`shape`]), an integration mesh with 6 Gauss points per triangle ([`IntegrationMesh`]),
+//! RPIM shape functions with supports of 20 neighbours ([`Rpim`]), plane-strain neo-Hookean or
+//! Saint Venant–Kirchhoff material ([`Hyperelastic`]), internal forces, tangent and consistent
+//! mass per grain ([`GrainModel`]), frictionless rigid walls ([`Wall`], appendix C).
 //!
-//! Not implemented: the grain–grain smoothed node-to-segment element (appendix B), so the
-//! meshfree path handles one grain among walls.
+//! One grain (calibration, dense linear algebra): Newton nested in augmented-Lagrangian loops
+//! ([`Problem`]) and the Bathe composite / trapezoidal dynamic schemes ([`Dynamics`]).
+//!
+//! Many grains ([`assembly`]): the two-pass smoothed node-to-segment element between grains
+//! ([`nts`]), a global sparse tangent ([`sparse`]), the same nonlinear loops and schemes, and
+//! sub-steps on non-convergence. Samples of star-shaped grains come from [`packing`].
 
 pub mod assembly;
 pub mod contact;
@@ -18,7 +20,9 @@ pub mod discretization;
 pub mod material;
 pub mod model;
 pub mod nts;
+pub mod packing;
 pub mod rpim;
+pub mod shape;
 pub mod solver;
 pub mod sparse;
 
