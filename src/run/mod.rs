@@ -9,6 +9,7 @@
 
 pub mod bench;
 pub mod checkpoint;
+pub mod meshfree;
 mod progress;
 pub mod sdem;
 pub mod simulation;
@@ -216,6 +217,9 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
 /// Runs a scenario to the end of its loading program, writing `macro.csv`, `grains.csv` and
 /// `summary.txt` in `options.out_dir`.
 pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSummary, RunError> {
+    if meshfree::settings_of(scenario).is_some() {
+        return meshfree::run_meshfree(scenario, options);
+    }
     let out = &options.out_dir;
     let world = build_world(scenario)?;
     std::fs::create_dir_all(out).map_err(io_error(out))?;

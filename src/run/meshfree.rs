@@ -1,0 +1,471 @@
+//! The meshfree multibody assembly ([`crate::meshfree::assembly`]) as a [`Simulation`] of the
+//! run loop: a scenario with `model: Meshfree(...)` runs through the same loading programs,
+//! measures and outputs as an SDEM scenario.
+//!
+//! Its `macro.csv` has the common columns (the level counts report every grain as `full`: the
+//! grains are fully deformable) and four of its own: `newton_iterations`, `augmentations`,
+//! `sub_steps` of the step, and `max_penetration`, the deepest interpenetration at the end of
+//! the step (a length). Its `grains.csv` has one row per grain: area centroid, current area,
+//! the mean Cauchy stress tensor over the grain (tension positive), the mean stress
+//! (compression positive) and the grain's contacts with other grains.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+
+use rand::SeedableRng;
+
+use super::simulation::{RunRecord, Simulation};
+use super::{RunError, io_error};
+use crate::boundary::loading::LoadState;
+use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size, box_walls};
+use crate::meshfree::assembly::{Assembly, AssemblyState, Evaluation, StepStats};
+use crate::meshfree::shape::{FourierParams, StarShape, place_nodes};
+use crate::meshfree::{
+    DiscNodes, GrainModel, Hyperelastic, IntegrationMesh, MeshfreeError, NodeDensity, NodeSet,
+    TimeScheme, packing,
+};
+use crate::output::Measures;
+use crate::sample;
+use crate::scenario::{GrainShapes, MeshfreeSettings, Scenario, TimeStep};
+
+/// A grain of the initial sample: its contour about its centre, where the centre is, and the
+/// rotation of the contour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleGrain {
+    pub shape: StarShape,
+    pub centre: [f64; 2],
+}
+
+/// The grains of a meshfree scenario, placed in its box: the sample's discs, or sand-like
+/// contours of the sample's radii placed anew without overlap.
+pub fn sample_grains(scenario: &Scenario) -> Result<Vec<SampleGrain>, RunError> {
+    let s = &scenario.sample;
+    let (x0, y0) = s.origin;
+    let discs: Vec<([f64; 2], f64)> = match (&s.loaded, s.spec()) {
+        (Some(loaded), _) => loaded
+            .grains
+            .iter()
+            .map(|g| ([g.center.x, g.center.y], g.radius))
+            .collect(),
+        (None, Some(spec)) => sample::generate(&spec, scenario.seed)?
+            .iter()
+            .map(|p| ([x0 + p.x, y0 + p.y], p.radius))
+            .collect(),
+        (None, None) => {
+            return Err(RunError::Setup(format!(
+                "scenario {}: sample.file has not been read (Scenario::load reads it)",
+                scenario.name
+            )));
+        }
+    };
+    match s.shapes.as_ref().unwrap_or(&GrainShapes::Discs) {
+        GrainShapes::Discs => Ok(discs
+            .into_iter()
+            .map(|(centre, radius)| SampleGrain {
+                shape: StarShape::Disc { radius },
+                centre,
+            })
+            .collect()),
+        GrainShapes::SandLike => {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(scenario.seed);
+            let params = FourierParams::default();
+            let shapes: Vec<StarShape> = discs
+                .iter()
+                .map(|&(_, r)| StarShape::random_fourier(r, &mut rng, &params))
+                .collect();
+            let b = s.bounds();
+            let mean_radius = discs.iter().map(|d| d.1).sum::<f64>() / discs.len() as f64;
+            let placed = packing::place_grains(
+                &shapes,
+                [b.x0, b.x1, b.y0, b.y1],
+                0.02 * mean_radius,
+                scenario.seed,
+            )
+            .map_err(|e| RunError::Setup(format!("sample.shapes: SandLike: {e}")))?;
+            Ok(shapes
+                .iter()
+                .zip(placed)
+                .map(|(shape, p)| SampleGrain {
+                    shape: shape.rotated(p.rotation),
+                    centre: p.centre,
+                })
+                .collect())
+        }
+    }
+}
+
+/// Field nodes and integration mesh of one grain, in the global frame.
+pub fn grain_model(
+    grain: &SampleGrain,
+    settings: &MeshfreeSettings,
+    material: Hyperelastic,
+) -> Result<GrainModel, MeshfreeError> {
+    let (mut nodes, mesh_inside): (NodeSet, bool) = match grain.shape {
+        StarShape::Disc { radius } => {
+            let nb = settings.boundary_nodes.div_ceil(4) * 4;
+            let density = NodeDensity {
+                boundary_nodes: nb.max(8),
+                grading: settings.grading,
+            };
+            (DiscNodes::disc(radius, density)?.into(), false)
+        }
+        ref shape => {
+            let perimeter = {
+                let o = shape.outline(1024);
+                (0..o.len())
+                    .map(|k| {
+                        let (p, q) = (o[k], o[(k + 1) % o.len()]);
+                        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+                    })
+                    .sum::<f64>()
+            };
+            let spacing = perimeter / settings.boundary_nodes as f64;
+            let n = place_nodes(shape, spacing, settings.grading)?;
+            (
+                NodeSet {
+                    positions: n.positions,
+                    boundary_count: n.boundary_count,
+                },
+                true,
+            )
+        }
+    };
+    for p in &mut nodes.positions {
+        p[0] += grain.centre[0];
+        p[1] += grain.centre[1];
+    }
+    if mesh_inside {
+        let mesh = IntegrationMesh::inside_boundary(&nodes.positions, nodes.boundary_count)?;
+        GrainModel::from_parts(nodes, mesh, material)
+    } else {
+        GrainModel::from_nodes(nodes, material)
+    }
+}
+
+/// The meshfree assembly of a scenario with what a run keeps beside it.
+pub struct Meshfree {
+    pub assembly: Assembly,
+    pub state: AssemblyState,
+    pub(crate) scheme: TimeScheme,
+    pub(crate) dt: f64,
+    pub(crate) step: u64,
+    /// Contacts, wall forces and energies at the end of the last step.
+    pub(crate) last: Evaluation,
+    pub(crate) stats: StepStats,
+    pub(crate) last_good: (u64, AssemblyState),
+    pub(crate) mean_diameter: f64,
+    pub(crate) young: f64,
+    pub(crate) density: f64,
+}
+
+/// The settings of a meshfree scenario (None for an SDEM model).
+pub fn settings_of(scenario: &Scenario) -> Option<MeshfreeSettings> {
+    match scenario.model {
+        crate::scenario::Model::Meshfree(s) => Some(s),
+        _ => None,
+    }
+}
+
+impl Meshfree {
+    /// Builds the grains, the box and the solver of a meshfree scenario, at rest.
+    pub fn new(scenario: &Scenario) -> Result<Self, RunError> {
+        let settings = settings_of(scenario).ok_or_else(|| {
+            RunError::Setup(format!("scenario {}: not a meshfree model", scenario.name))
+        })?;
+        let m = &scenario.material;
+        let material = Hyperelastic::new(settings.law, m.young, m.poisson, m.density)
+            .map_err(|e| RunError::Setup(format!("material: {e}")))?;
+        let grains = sample_grains(scenario)?;
+        let models = grains
+            .iter()
+            .enumerate()
+            .map(|(k, g)| {
+                grain_model(g, &settings, material)
+                    .map_err(|e| RunError::Setup(format!("meshfree grain {k}: {e}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mean_radius = grains
+            .iter()
+            .map(|g| (g.shape.area() / std::f64::consts::PI).sqrt())
+            .sum::<f64>()
+            / grains.len() as f64;
+        let b = scenario.sample.bounds();
+        let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
+        let mut assembly = Assembly::new(
+            models,
+            walls,
+            [scenario.gravity.0, scenario.gravity.1],
+            (settings.rayleigh_alpha, settings.rayleigh_beta),
+            settings.solver(m.young, mean_radius),
+        )
+        .map_err(|e| RunError::Setup(format!("meshfree assembly: {e}")))?;
+        assembly.min_sub_step = settings.min_sub_step;
+        let dt = match scenario.time_step {
+            TimeStep::Fixed(dt) => dt,
+            TimeStep::FractionOfCritical(_) => {
+                return Err(RunError::Setup(
+                    "time_step: the meshfree solver is implicit: give a Fixed(dt)".into(),
+                ));
+            }
+        };
+        let state = assembly.initial_state();
+        let last = assembly
+            .evaluate(&state.u, &state.multipliers, 0.0, None, None)
+            .map_err(|e| RunError::Setup(format!("meshfree initial state: {e}")))?;
+        if let Some(e) = last.elements.iter().find(|e| e.gap < 0.0) {
+            return Err(RunError::Setup(format!(
+                "meshfree grains overlap at the start: node {} of grain {} is {:.3e} inside {:?}",
+                e.key.node, e.key.slave, -e.gap, e.key.master
+            )));
+        }
+        Ok(Self {
+            assembly,
+            last_good: (0, state.clone()),
+            state,
+            scheme: settings.scheme,
+            dt,
+            step: 0,
+            last,
+            stats: StepStats::default(),
+            mean_diameter: 2.0 * mean_radius,
+            young: m.young,
+            density: m.density,
+        })
+    }
+
+    /// Compressive force of the grains on each wall (>= 0).
+    fn wall_forces(&self) -> [f64; 4] {
+        let walls = &self.assembly.walls;
+        std::array::from_fn(|w| {
+            let f = self.last.wall_force(w);
+            -(f[0] * walls[w].normal.x + f[1] * walls[w].normal.y)
+        })
+    }
+
+    fn grain_areas(&self, u: &[f64]) -> Vec<(f64, [f64; 2])> {
+        (0..self.assembly.grains.len())
+            .map(|g| {
+                self.assembly.grains[g].contour_area_centroid(self.assembly.grain_slice(u, g))
+            })
+            .collect()
+    }
+
+    /// Packing fraction, wall stresses (compression positive) and box size.
+    fn box_state(&self) -> (f64, f64, f64, f64, f64) {
+        let (width, height) = box_size(&self.assembly.walls);
+        let f = self.wall_forces();
+        let area: f64 = self.grain_areas(&self.state.u).iter().map(|a| a.0).sum();
+        (
+            area / (width * height),
+            0.5 * (f[LEFT] + f[RIGHT]) / height,
+            0.5 * (f[BOTTOM] + f[TOP]) / width,
+            width,
+            height,
+        )
+    }
+
+    /// Contacts of each grain with other grains.
+    fn contacts_per_grain(&self) -> Vec<u32> {
+        let mut c = vec![0; self.assembly.grains.len()];
+        for (i, j) in self.last.contact_pairs() {
+            c[i as usize] += 1;
+            c[j as usize] += 1;
+        }
+        c
+    }
+
+    fn write_state(&self, path: &Path, state: &AssemblyState) -> std::io::Result<()> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(
+            out,
+            "id,x,y,area,stress_xx,stress_yy,stress_xy,mean_stress_c,contacts"
+        )?;
+        let contacts = self.contacts_per_grain();
+        for (g, model) in self.assembly.grains.iter().enumerate() {
+            let u = self.assembly.grain_slice(&state.u, g);
+            let (area, c) = model.contour_area_centroid(u);
+            let s = model
+                .stress_integral(u)
+                .map_err(|e| std::io::Error::other(format!("grain {g}: {e}")))?;
+            let (sxx, syy, sxy) = (s[0][0] / area, s[1][1] / area, 0.5 * (s[0][1] + s[1][0]) / area);
+            writeln!(
+                out,
+                "{g},{:.12e},{:.12e},{:.12e},{sxx:.9e},{syy:.9e},{sxy:.9e},{:.9e},{}",
+                c[0],
+                c[1],
+                area,
+                -0.5 * (sxx + syy),
+                contacts[g]
+            )?;
+        }
+        out.flush()
+    }
+}
+
+impl Simulation for Meshfree {
+    type Failure = MeshfreeError;
+    const EXTRA_COLUMNS: &'static [&'static str] = &[
+        "newton_iterations",
+        "augmentations",
+        "sub_steps",
+        "max_penetration",
+    ];
+
+    fn step_count(&self) -> u64 {
+        self.step
+    }
+
+    fn time(&self) -> f64 {
+        self.state.time
+    }
+
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    fn grain_count(&self) -> usize {
+        self.assembly.grains.len()
+    }
+
+    fn walls(&self) -> &[Wall] {
+        &self.assembly.walls
+    }
+
+    fn walls_mut(&mut self) -> &mut [Wall] {
+        &mut self.assembly.walls
+    }
+
+    fn take_step(&mut self) -> Result<(), MeshfreeError> {
+        let (eval, stats) = self.assembly.step(&mut self.state, self.dt, self.scheme)?;
+        self.last = eval;
+        self.stats = stats;
+        self.step += 1;
+        Ok(())
+    }
+
+    fn load_state(&self, jammed: bool) -> LoadState {
+        let (phi, sxx, syy, _, _) = self.box_state();
+        LoadState {
+            phi,
+            sxx,
+            syy,
+            jammed,
+            mean_diameter: self.mean_diameter,
+            density: self.density,
+            young: self.young,
+        }
+    }
+
+    fn measures(&self, phase: &str, strain_rate: f64) -> Measures {
+        let (phi, sxx_c, syy_c, box_width, box_height) = self.box_state();
+        let (z, z_nr) = self.coordination();
+        let state = self.load_state(true);
+        Measures {
+            step: self.step,
+            time: self.state.time,
+            phase: phase.to_string(),
+            phi,
+            sxx_c,
+            syy_c,
+            p_c: 0.5 * (sxx_c + syy_c),
+            q_c: 0.5 * (sxx_c - syy_c),
+            z,
+            z_nr,
+            kinetic_energy: self.assembly.kinetic_energy(&self.state.v),
+            elastic_energy: self.last.elastic_energy,
+            inertial_number: state.inertial_number(strain_rate),
+            strain_rate,
+            box_width,
+            box_height,
+            contacts: self.contacts(),
+            capped_contacts: 0,
+            levels: [0, 0, self.assembly.grains.len() as u64],
+        }
+    }
+
+    fn coordination(&self) -> (f64, f64) {
+        let pairs = self.last.contact_pairs();
+        let n = self.assembly.grains.len().max(1) as f64;
+        let per_grain = self.contacts_per_grain();
+        let carrying = |g: u32| per_grain[g as usize] >= 2;
+        let grains_nr = per_grain.iter().filter(|&&c| c >= 2).count();
+        let contacts_nr = pairs
+            .iter()
+            .filter(|(i, j)| carrying(*i) && carrying(*j))
+            .count();
+        let z_nr = if grains_nr > 0 {
+            2.0 * contacts_nr as f64 / grains_nr as f64
+        } else {
+            0.0
+        };
+        (2.0 * pairs.len() as f64 / n, z_nr)
+    }
+
+    fn contacts(&self) -> u64 {
+        self.last.contact_pairs().len() as u64
+    }
+
+    fn extra_columns(&self, row: &mut String) {
+        let s = &self.stats;
+        let _ = write!(
+            row,
+            ",{},{},{},{:.6e}",
+            s.solve.newton_iterations,
+            s.solve.augmentations,
+            s.sub_steps,
+            self.last.max_penetration()
+        );
+    }
+
+    fn keep_last_good(&mut self) {
+        self.last_good = (self.step, self.state.clone());
+    }
+
+    fn write_last_good(&self, path: &Path) -> std::io::Result<()> {
+        self.write_state(path, &self.last_good.1)
+    }
+
+    fn write_grains(&self, path: &Path) -> std::io::Result<()> {
+        self.write_state(path, &self.state)
+    }
+
+    fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {
+        let _ = run;
+        Err(std::io::Error::new(
+            std::io::ErrorKind::Unsupported,
+            format!(
+                "{}: checkpoints of meshfree runs are not implemented yet (run without \
+                 --checkpoint-every)",
+                path.display()
+            ),
+        ))
+    }
+}
+
+/// Runs a meshfree scenario from its start.
+pub fn run_meshfree(
+    scenario: &Scenario,
+    options: &super::RunOptions,
+) -> Result<super::RunSummary, RunError> {
+    let out = &options.out_dir;
+    let sim = Meshfree::new(scenario)?;
+    std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let macro_path = out.join("macro.csv");
+    let writer =
+        crate::output::MacroWriter::create_with_columns(&macro_path, Meshfree::EXTRA_COLUMNS)
+            .map_err(io_error(&macro_path))?;
+    let program = crate::boundary::loading::LoadingProgram::new(
+        scenario.loading.clone(),
+        &sim.assembly.walls,
+    );
+    super::run_loop(
+        scenario,
+        sim,
+        program,
+        super::LoopState::default(),
+        writer,
+        options,
+        None,
+    )
+}
