@@ -268,12 +268,20 @@ fn run(cli: Cli) -> Result<()> {
             );
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
             let pool = thread_pool(threads)?;
+            let step_note = match parsed.model {
+                sdem::scenario::Model::Meshfree(m) => {
+                    format!("implicit meshfree, {:?} scheme", m.scheme)
+                }
+                _ => format!(
+                    "{:.2} x critical",
+                    parsed.time_step_value() / parsed.critical_time_step()
+                ),
+            };
             eprintln!(
-                "sdem: {} — {} grains, dt = {:.3e} ({:.2} x critical), {}, output in {}",
+                "sdem: {} — {} grains, dt = {:.3e} ({step_note}), {}, output in {}",
                 parsed.name,
                 parsed.sample.grain_count(),
                 parsed.time_step_value(),
-                parsed.time_step_value() / parsed.critical_time_step(),
                 thread_count(&pool),
                 out_dir.display()
             );
@@ -410,10 +418,17 @@ fn run(cli: Cli) -> Result<()> {
                 ),
                 None => println!("sample: {} generated grains", parsed.sample.grain_count()),
             }
-            println!(
-                "critical time step estimate: {:.4e}",
-                parsed.critical_time_step()
-            );
+            if let sdem::scenario::Model::Meshfree(m) = parsed.model {
+                println!(
+                    "model: meshfree, {} boundary nodes per grain, {:?} law, {:?} scheme (implicit: no critical step)",
+                    m.boundary_nodes, m.law, m.scheme
+                );
+            } else {
+                println!(
+                    "critical time step estimate: {:.4e}",
+                    parsed.critical_time_step()
+                );
+            }
             println!("time step: {:.4e}", parsed.time_step_value());
             if let Some(a) = parsed.parameters().adaptive {
                 println!(

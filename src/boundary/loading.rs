@@ -41,6 +41,9 @@ pub enum StopWhen {
     /// Engineering strain of the box in this phase, `1 - L/L0` (the width for oedometric
     /// loading, the width for isotropic loading too).
     Strain(f64),
+    /// Vertical engineering strain of the box in this phase, `1 - H/H0` (uniaxial and biaxial
+    /// loading).
+    VerticalStrain(f64),
     /// The first of several conditions.
     Any(Vec<StopWhen>),
 }
@@ -82,6 +85,13 @@ pub enum Phase {
         max_rate: f64,
         until: StopWhen,
     },
+    /// The top wall moves down, the others stay: uniaxial compression (the meshfree paper's
+    /// 100-grain example).
+    Uniaxial { rate: StrainRate, until: StopWhen },
+    /// Biaxial shear at constant area: the top and bottom walls move in at the strain rate, the
+    /// left and right walls out at the same rate, so that `d(width height)/dt = 0` (the area
+    /// drifts by `(rate dt)^2` per step at most).
+    Biaxial { rate: StrainRate, until: StopWhen },
     /// Walls at rest.
     Relax { until: StopWhen },
 }
@@ -92,6 +102,8 @@ impl Phase {
             Phase::Isotropic { .. } => "isotropic",
             Phase::Oedometric { .. } => "oedometric",
             Phase::Servo { .. } => "servo",
+            Phase::Uniaxial { .. } => "uniaxial",
+            Phase::Biaxial { .. } => "biaxial",
             Phase::Relax { .. } => "relax",
         }
     }
@@ -101,6 +113,8 @@ impl Phase {
             Phase::Isotropic { until, .. }
             | Phase::Oedometric { until, .. }
             | Phase::Servo { until, .. }
+            | Phase::Uniaxial { until, .. }
+            | Phase::Biaxial { until, .. }
             | Phase::Relax { until } => until,
         }
     }
@@ -244,6 +258,19 @@ impl LoadingProgram {
                 walls[BOTTOM].velocity.y = -0.5 * expand_y * height;
                 walls[TOP].velocity.y = 0.5 * expand_y * height;
             }
+            Some(Phase::Uniaxial { rate, .. }) => {
+                let r = rate.value(state);
+                self.rate = r;
+                walls[TOP].velocity.y = -r * height;
+            }
+            Some(Phase::Biaxial { rate, .. }) => {
+                let r = rate.value(state);
+                self.rate = r;
+                walls[BOTTOM].velocity.y = 0.5 * r * height;
+                walls[TOP].velocity.y = -0.5 * r * height;
+                walls[LEFT].velocity.x = -0.5 * r * width;
+                walls[RIGHT].velocity.x = 0.5 * r * width;
+            }
             Some(Phase::Relax { .. }) | None => {}
         }
     }
@@ -263,6 +290,7 @@ impl LoadingProgram {
             StopWhen::Steps(n) => step - self.phase_start_step >= *n,
             StopWhen::Time(t) => time - self.phase_start_time >= *t,
             StopWhen::Strain(e) => 1.0 - box_size(walls).0 / self.phase_start_size.0 >= *e,
+            StopWhen::VerticalStrain(e) => 1.0 - box_size(walls).1 / self.phase_start_size.1 >= *e,
             StopWhen::Any(list) => list
                 .iter()
                 .any(|u| self.reached(u, step, time, walls, state)),

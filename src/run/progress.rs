@@ -31,6 +31,11 @@ fn stop_fraction(
             let (w, _) = box_size(sim.walls());
             (1.0 - w / w0) / e
         }
+        StopWhen::VerticalStrain(e) => {
+            let (_, h0) = program.phase_start_size;
+            let (_, h) = box_size(sim.walls());
+            (1.0 - h / h0) / e
+        }
         StopWhen::Any(list) => {
             return list
                 .iter()

@@ -683,6 +683,104 @@ impl Scenario {
         Ok(warnings)
     }
 
+    /// What only one solver accepts: the meshfree settings, shapes and gravity (meshfree), an
+    /// affine phase or a critical-fraction time step (SDEM).
+    fn validate_solver_choice(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
+        let Model::Meshfree(s) = self.model else {
+            if let Some(shapes) = &self.sample.shapes
+                && *shapes != GrainShapes::Discs
+            {
+                return Err(invalid(
+                    "sample.shapes",
+                    format!("{shapes:?}"),
+                    "Discs, or left out: SDEM grains are discs (model: Meshfree(...) resolves \
+                     grains of any shape)",
+                ));
+            }
+            if self.gravity != (0.0, 0.0) {
+                return Err(invalid(
+                    "gravity",
+                    format!("({}, {})", num(self.gravity.0), num(self.gravity.1)),
+                    "(0, 0), or left out: only the meshfree model has body forces",
+                ));
+            }
+            return Ok(());
+        };
+        if !(self.gravity.0.is_finite() && self.gravity.1.is_finite()) {
+            return Err(invalid(
+                "gravity",
+                format!("({}, {})", num(self.gravity.0), num(self.gravity.1)),
+                "two finite numbers",
+            ));
+        }
+        if self.material.poisson >= 0.5 {
+            return Err(invalid(
+                "material.poisson",
+                num(self.material.poisson),
+                "below 0.5 for model: Meshfree (its hyperelastic laws are compressible; \
+                 nu <= 0.45 is free of volumetric locking at the usual nodal densities)",
+            ));
+        }
+        if self.material.poisson > 0.45 {
+            warnings.push(format!(
+                "material.poisson = {}: watch for volumetric locking of the meshfree grains \
+                 (check convergence in model.Meshfree.boundary_nodes)",
+                self.material.poisson
+            ));
+        }
+        let f = "model.Meshfree";
+        if s.boundary_nodes < 8 {
+            return Err(invalid(
+                &format!("{f}.boundary_nodes"),
+                s.boundary_nodes,
+                "at least 8 (a grain needs 21 field nodes for its 20-neighbour supports)",
+            ));
+        }
+        non_negative(&format!("{f}.grading"), s.grading)?;
+        positive(&format!("{f}.k0"), s.k0)?;
+        if !(s.alpha_k.is_finite() && s.alpha_k >= 1.0) {
+            return Err(invalid(&format!("{f}.alpha_k"), num(s.alpha_k), ">= 1"));
+        }
+        positive(&format!("{f}.gap_tolerance"), s.gap_tolerance)?;
+        positive(&format!("{f}.force_tolerance"), s.force_tolerance)?;
+        if s.max_newton == 0 || s.max_augmentations == 0 {
+            return Err(invalid(
+                &format!("{f}.max_newton / max_augmentations"),
+                format!("{} / {}", s.max_newton, s.max_augmentations),
+                "at least 1 each",
+            ));
+        }
+        non_negative(&format!("{f}.rayleigh_alpha"), s.rayleigh_alpha)?;
+        non_negative(&format!("{f}.rayleigh_beta"), s.rayleigh_beta)?;
+        if !(s.min_sub_step > 0.0 && s.min_sub_step <= 1.0) {
+            return Err(invalid(
+                &format!("{f}.min_sub_step"),
+                num(s.min_sub_step),
+                "in (0, 1]",
+            ));
+        }
+        if !matches!(self.time_step, TimeStep::Fixed(_)) {
+            return Err(invalid(
+                "time_step",
+                format!("{:?}", self.time_step),
+                "Fixed(dt) for model: Meshfree (an implicit solver has no critical step)",
+            ));
+        }
+        for (k, phase) in self.loading.iter().enumerate() {
+            if matches!(
+                phase,
+                Phase::Isotropic { affine: true, .. } | Phase::Oedometric { affine: true, .. }
+            ) {
+                return Err(invalid(
+                    &format!("loading[{k}].affine"),
+                    "true",
+                    "false for model: Meshfree (its grains follow the walls through contact)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Every check that needs neither the sample nor the time step.
     fn validate_settings(&self) -> Result<Vec<String>, ScenarioError> {
         let mut warnings = Vec::new();
@@ -722,6 +820,7 @@ impl Scenario {
                 invalid(&format!("model.Adaptive.{field}"), num(value), allowed)
             })?;
         }
+        self.validate_solver_choice(&mut warnings)?;
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
@@ -754,7 +853,10 @@ impl Scenario {
         for (k, phase) in self.loading.iter().enumerate() {
             let field = format!("loading[{k}]");
             match phase {
-                Phase::Isotropic { rate, until, .. } | Phase::Oedometric { rate, until, .. } => {
+                Phase::Isotropic { rate, until, .. }
+                | Phase::Oedometric { rate, until, .. }
+                | Phase::Uniaxial { rate, until }
+                | Phase::Biaxial { rate, until } => {
                     validate_rate(&format!("{field}.rate"), rate, &mut warnings)?;
                     validate_until(&format!("{field}.until"), until)?;
                 }
@@ -872,6 +974,9 @@ impl Scenario {
 
     /// The time step against its critical estimate (which needs the smallest radius).
     fn validate_time_step(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
+        if let (Model::Meshfree(_), TimeStep::Fixed(dt)) = (self.model, self.time_step) {
+            return positive("time_step.Fixed", dt);
+        }
         let m = &self.material;
         let critical = self.critical_time_step();
         match self.time_step {
@@ -1131,7 +1236,7 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
         }
         StopWhen::MeanStress(p) => compressive_target(field, *p)?,
         StopWhen::Time(t) => positive(field, *t)?,
-        StopWhen::Strain(e) => {
+        StopWhen::Strain(e) | StopWhen::VerticalStrain(e) => {
             if !(e.is_finite() && *e > 0.0 && *e < 1.0) {
                 return Err(invalid(field, num(*e), "a strain in (0, 1)"));
             }
