@@ -791,6 +791,21 @@ impl Assembly {
         self.solve(u, multipliers, None)
     }
 
+    /// Potential energy of the body forces, `-f_ext . x` over the current node positions (for
+    /// gravity, `-m g . x_c` summed over grains: the consistent body force reproduces it).
+    pub fn potential_energy(&self, u: &[f64]) -> f64 {
+        let mut e = 0.0;
+        for (g, model) in self.grains.iter().enumerate() {
+            let off = self.offsets[g];
+            for (a, x) in model.nodes.positions.iter().enumerate() {
+                for i in 0..2 {
+                    e -= self.external[off + 2 * a + i] * (x[i] + u[off + 2 * a + i]);
+                }
+            }
+        }
+        e
+    }
+
     /// Kinetic energy `v^T M v / 2`.
     pub fn kinetic_energy(&self, v: &[f64]) -> f64 {
         let mut e = 0.0;

@@ -4,8 +4,9 @@
 //!
 //! Its `macro.csv` has the common columns (the level counts report every grain as `full`: the
 //! grains are fully deformable) and four of its own: `newton_iterations`, `augmentations`,
-//! `sub_steps` of the step, and `max_penetration`, the deepest interpenetration at the end of
-//! the step (a length). Its `grains.csv` has one row per grain: area centroid, current area,
+//! `sub_steps` of the step, `max_penetration`, the deepest interpenetration at the end of
+//! the step (a length), and `potential_energy` of gravity (`-m g . x_c` summed over grains, 0
+//! without gravity). Its `grains.csv` has one row per grain: area centroid, current area,
 //! the mean Cauchy stress tensor over the grain (tension positive), the mean stress
 //! (compression positive) and the grain's contacts with other grains.
 
@@ -310,6 +311,7 @@ impl Simulation for Meshfree {
         "augmentations",
         "sub_steps",
         "max_penetration",
+        "potential_energy",
     ];
 
     fn step_count(&self) -> u64 {
@@ -410,11 +412,12 @@ impl Simulation for Meshfree {
         let s = &self.stats;
         let _ = write!(
             row,
-            ",{},{},{},{:.6e}",
+            ",{},{},{},{:.6e},{:.9e}",
             s.solve.newton_iterations,
             s.solve.augmentations,
             s.sub_steps,
-            self.last.max_penetration()
+            self.last.max_penetration(),
+            self.assembly.potential_energy(&self.state.u)
         );
     }
 
