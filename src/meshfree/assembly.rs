@@ -74,6 +74,9 @@ pub struct Evaluation {
     /// The largest magnitude among the terms summed into the residual, for a round-off floor
     /// on the Newton tolerance.
     pub force_scale: f64,
+    /// Each grain's tangent blocks (internal, inertia, damping) on its pattern, when the
+    /// evaluation was asked for the tangent.
+    grain_blocks: Vec<Vec<[f64; 4]>>,
 }
 
 impl Evaluation {
@@ -176,6 +179,71 @@ pub struct Assembly {
     external: Vec<f64>,
     initial_stiffness: Vec<Vec<[f64; 4]>>,
     solver: SparseSolver,
+    contact_pattern: ContactPattern,
+}
+
+/// The node pairs that contact elements couple in the sparse tangent: the union of the pairs
+/// of the elements met since the last reset, so that the triplets' index sequence (and with it
+/// the sparse solver's symbolic analysis) stays the same while the active contacts change
+/// within it. Pairs of elements that have become inactive stay with zero values until the
+/// pattern is trimmed at the start of a step (when more than half of it is stale).
+#[derive(Debug, Default)]
+struct ContactPattern {
+    /// (x DoF of the row node, x DoF of the column node), sorted.
+    pairs: Vec<(usize, usize)>,
+    slot: std::collections::HashMap<(usize, usize), usize>,
+    /// Pairs the last gathered elements used.
+    used: usize,
+}
+
+impl ContactPattern {
+    /// The elements' stiffness (negated: the tangent of the residual) summed on the pattern,
+    /// after adding the pairs it lacks. Blocks `[K_xx, K_yx, K_xy, K_yy]`.
+    fn gather(&mut self, elements: &[ContactElement]) -> Vec<[f64; 4]> {
+        let mut missing = Vec::new();
+        fn node_pairs(e: &ContactElement) -> impl Iterator<Item = (usize, usize, (usize, usize))> + '_ {
+            let nodes = e.dofs.len() / 2;
+            let d = &e.dofs;
+            (0..nodes).flat_map(move |p| (0..nodes).map(move |q| (p, q, (d[2 * p], d[2 * q]))))
+        }
+        for e in elements {
+            for (_, _, key) in node_pairs(e) {
+                if !self.slot.contains_key(&key) {
+                    missing.push(key);
+                }
+            }
+        }
+        if !missing.is_empty() {
+            self.pairs.extend(missing);
+            self.pairs.sort_unstable();
+            self.pairs.dedup();
+            self.slot = self.pairs.iter().enumerate().map(|(k, &p)| (p, k)).collect();
+        }
+        let mut values = vec![[0.0; 4]; self.pairs.len()];
+        let mut touched = vec![false; self.pairs.len()];
+        for e in elements {
+            let n = e.dofs.len();
+            for (p, q, key) in node_pairs(e) {
+                let s = self.slot[&key];
+                touched[s] = true;
+                let blk = &mut values[s];
+                blk[0] -= e.stiffness[(2 * p) * n + 2 * q];
+                blk[1] -= e.stiffness[(2 * p + 1) * n + 2 * q];
+                blk[2] -= e.stiffness[(2 * p) * n + 2 * q + 1];
+                blk[3] -= e.stiffness[(2 * p + 1) * n + 2 * q + 1];
+            }
+        }
+        self.used = touched.iter().filter(|&&t| t).count();
+        values
+    }
+
+    /// Forgets the pattern when more than half of it is stale.
+    fn trim(&mut self) {
+        if self.pairs.len() > 2 * self.used {
+            self.pairs.clear();
+            self.slot.clear();
+        }
+    }
 }
 
 /// Current boundary positions of a grain.
@@ -256,6 +324,7 @@ impl Assembly {
             external,
             initial_stiffness,
             solver: SparseSolver::new(),
+            contact_pattern: ContactPattern::default(),
         })
     }
 
@@ -427,16 +496,16 @@ impl Assembly {
         out
     }
 
-    /// Residual and, if `tangent` is given, its Jacobian as triplets, at displacement `u`.
+    /// Residual at displacement `u`, and with `with_tangent` the pieces of its Jacobian
+    /// (grain blocks and contact elements' stiffness).
     pub fn evaluate(
         &self,
         u: &[f64],
         multipliers: &ContactMultipliers,
         k: f64,
         dynamic: Option<&DynamicTerms>,
-        tangent: Option<&mut TripletMatrix>,
+        with_tangent: bool,
     ) -> Result<Evaluation, MeshfreeError> {
-        let with_tangent = tangent.is_some();
         let (alpha, beta) = self.rayleigh;
         // Per grain: internal forces, dynamic terms, tangent blocks.
         let per_grain: Vec<(Vec<f64>, Vec<[f64; 4]>, f64, f64)> = (0..self.grains.len())
@@ -537,45 +606,57 @@ impl Assembly {
                 force_scale = force_scale.max(f.abs());
             }
         }
-        let mut fixed = vec![false; self.dofs()];
         for &i in &self.fixed {
-            fixed[i] = true;
             residual[i] = 0.0;
         }
-        if let Some(t) = tangent {
-            t.clear();
-            for (g, (_, blocks, _, _)) in per_grain.iter().enumerate() {
-                let off = self.offsets[g];
-                for (&(a, b), blk) in self.grains[g].pattern.pairs.iter().zip(blocks) {
-                    let (ra, cb) = (off + 2 * a as usize, off + 2 * b as usize);
-                    for (q, (dr, dc)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
-                        let (row, col) = (ra + dr, cb + dc);
-                        if !fixed[row] && !fixed[col] {
-                            t.push(row, col, blk[q]);
-                        }
-                    }
-                }
-            }
-            for e in &elements {
-                let n = e.dofs.len();
-                for (p, &row) in e.dofs.iter().enumerate() {
-                    for (q, &col) in e.dofs.iter().enumerate() {
-                        if !fixed[row] && !fixed[col] {
-                            t.push(row, col, -e.stiffness[p * n + q]);
-                        }
-                    }
-                }
-            }
-            for &i in &self.fixed {
-                t.push(i, i, 1.0);
-            }
-        }
+        let grain_blocks = if with_tangent {
+            per_grain.into_iter().map(|p| p.1).collect()
+        } else {
+            Vec::new()
+        };
         Ok(Evaluation {
             residual,
             elements,
             elastic_energy,
             force_scale,
+            grain_blocks,
         })
+    }
+
+    /// The Jacobian of an evaluation made with the tangent, as triplets: the grains' blocks,
+    /// then the contact elements' 2 x 2 node blocks on the contact pattern (see
+    /// [`ContactPattern`]), then 1 on the diagonal of the fixed DoF (their rows and columns
+    /// are otherwise left out).
+    fn fill_tangent(&mut self, eval: &Evaluation, t: &mut TripletMatrix) {
+        let mut fixed = vec![false; self.dofs()];
+        for &i in &self.fixed {
+            fixed[i] = true;
+        }
+        t.clear();
+        for (g, blocks) in eval.grain_blocks.iter().enumerate() {
+            let off = self.offsets[g];
+            for (&(a, b), blk) in self.grains[g].pattern.pairs.iter().zip(blocks) {
+                let (ra, cb) = (off + 2 * a as usize, off + 2 * b as usize);
+                for (q, (dr, dc)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                    let (row, col) = (ra + dr, cb + dc);
+                    if !fixed[row] && !fixed[col] {
+                        t.push(row, col, blk[q]);
+                    }
+                }
+            }
+        }
+        let values = self.contact_pattern.gather(&eval.elements);
+        for (&(ra, cb), blk) in self.contact_pattern.pairs.iter().zip(&values) {
+            for (q, (dr, dc)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                let (row, col) = (ra + dr, cb + dc);
+                if !fixed[row] && !fixed[col] {
+                    t.push(row, col, blk[q]);
+                }
+            }
+        }
+        for &i in &self.fixed {
+            t.push(i, i, 1.0);
+        }
     }
 
     fn all_points_valid(&self, u: &[f64]) -> bool {
@@ -584,7 +665,9 @@ impl Assembly {
             .all(|g| self.grains[g].all_points_valid(self.grain_slice(u, g)))
     }
 
-    /// Newton iterations at fixed multipliers and contact stiffness.
+    /// Newton iterations at fixed multipliers and contact stiffness. The convergence test
+    /// needs the residual only: the tangent (several times its cost) is computed only when
+    /// another iteration follows.
     fn newton(
         &mut self,
         u: &mut Vec<f64>,
@@ -594,9 +677,8 @@ impl Assembly {
         stats: &mut SolveStats,
     ) -> Result<Evaluation, MeshfreeError> {
         let mut tangent = TripletMatrix::new(self.dofs());
-        let mut last = f64::INFINITY;
+        let mut eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         for _ in 0..self.settings.max_newton {
-            let eval = self.evaluate(u, multipliers, k, dynamic, Some(&mut tangent))?;
             let norm = eval
                 .residual
                 .iter()
@@ -606,12 +688,13 @@ impl Assembly {
                     "the residual is not finite (NaN or infinity)".into(),
                 ));
             }
-            last = norm;
             if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
                 return Ok(eval);
             }
             stats.newton_iterations += 1;
-            let mut du: Vec<f64> = eval.residual.iter().map(|v| -v).collect();
+            let with_tangent = self.evaluate(u, multipliers, k, dynamic, true)?;
+            self.fill_tangent(&with_tangent, &mut tangent);
+            let mut du: Vec<f64> = with_tangent.residual.iter().map(|v| -v).collect();
             self.solver.solve(&tangent, &mut du)?;
             let mut step = 1.0;
             let mut accepted = false;
@@ -629,9 +712,17 @@ impl Assembly {
                     "every Newton step inverts the material (det F <= 0)".into(),
                 ));
             }
+            eval = self.evaluate(u, multipliers, k, dynamic, false)?;
+        }
+        let norm = eval
+            .residual
+            .iter()
+            .fold(0.0f64, |s, v| s.max(v.abs()));
+        if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
+            return Ok(eval);
         }
         Err(MeshfreeError::NotConverged(format!(
-            "Newton did not converge in {} iterations (residual {last:.3e} > {:.1e})",
+            "Newton did not converge in {} iterations (residual {norm:.3e} > {:.1e})",
             self.settings.max_newton, self.settings.force_tolerance
         )))
     }
@@ -693,6 +784,7 @@ impl Assembly {
         dt: f64,
         scheme: TimeScheme,
     ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        self.contact_pattern.trim();
         let walls0 = self.walls.clone();
         let (u0, v0, a0) = (&state.u, &state.v, &state.a);
         let mut stats = SolveStats::default();

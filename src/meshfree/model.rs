@@ -373,8 +373,12 @@ impl GrainModel {
         }
     }
 
-    /// Elastic energy, internal forces (added to `force`) and, if asked, the tangent (added to
-    /// `tangent`). Fails if a Gauss point is inverted (`det F <= 0`).
+    /// Elastic energy, internal forces (added to `force`) and, if asked, the tangent (written
+    /// over `tangent`'s content). Fails if a Gauss point is inverted (`det F <= 0`).
+    ///
+    /// The tangent is symmetric (hyperelastic laws: `A_iJkL = A_kLiJ`), so only the blocks
+    /// `(a, b)` with `a <= b` are integrated and the others are mirrored: half the work of the
+    /// Gauss-point loop, which dominates the cost of a Newton iteration.
     pub fn internal(
         &self,
         u: &[f64],
@@ -383,6 +387,9 @@ impl GrainModel {
     ) -> Result<f64, MeshfreeError> {
         let mut energy = 0.0;
         let mut t = Vec::new();
+        if let Some(k) = tangent.as_deref_mut() {
+            k.fill_zero();
+        }
         for g in 0..self.gp_weight.len() {
             let f = self.deformation_gradient(g, u);
             let resp = self
@@ -420,17 +427,28 @@ impl GrainModel {
                     }
                 }
                 let n = kmat.n;
-                for kb in r.clone() {
+                // The support lists are in increasing node order: la <= lb is a <= b.
+                for (lb, kb) in r.clone().enumerate() {
                     let b = self.gp_nodes[kb];
                     let gb = [self.gp_dx[kb], self.gp_dy[kb]];
                     for kk in 0..2 {
                         let col = &mut kmat.data[(2 * b + kk) * n..(2 * b + kk + 1) * n];
-                        for (la, ka) in r.clone().enumerate() {
+                        for (la, ka) in r.clone().take(lb + 1).enumerate() {
                             let a = self.gp_nodes[ka];
                             let ta = &t[la * 8..la * 8 + 8];
                             col[2 * a] += ta[kk * 2] * gb[0] + ta[kk * 2 + 1] * gb[1];
                             col[2 * a + 1] += ta[4 + kk * 2] * gb[0] + ta[4 + kk * 2 + 1] * gb[1];
                         }
+                    }
+                }
+            }
+        }
+        if let Some(k) = tangent {
+            let n = k.n;
+            for col in 0..n {
+                for row in 0..n {
+                    if row / 2 > col / 2 {
+                        k.data[col * n + row] = k.data[row * n + col];
                     }
                 }
             }

@@ -212,7 +212,7 @@ impl Meshfree {
         };
         let state = assembly.initial_state();
         let last = assembly
-            .evaluate(&state.u, &state.multipliers, 0.0, None, None)
+            .evaluate(&state.u, &state.multipliers, 0.0, None, false)
             .map_err(|e| RunError::Setup(format!("meshfree initial state: {e}")))?;
         if let Some(e) = last.elements.iter().find(|e| e.gap < 0.0) {
             return Err(RunError::Setup(format!(
