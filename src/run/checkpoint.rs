@@ -73,7 +73,7 @@ pub enum CheckpointError {
     #[error("{path}: corrupt checkpoint ({reason})")]
     Corrupt { path: String, reason: String },
     /// A checkpoint of another solver than the one asked for (read it with [`AnyCheckpoint`]).
-    #[error("{path}: a checkpoint of a {found} run, not of an {expected} run")]
+    #[error("{path}: a checkpoint of a run with the {found} solver, not the {expected} solver")]
     OtherSolver {
         path: String,
         found: &'static str,
