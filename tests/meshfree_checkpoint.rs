@@ -57,9 +57,10 @@ fn sdem() -> Command {
 /// The uninterrupted run (on `threads` threads), with a checkpoint every [`EVERY`] steps.
 fn reference(name: &str, threads: usize) -> PathBuf {
     let dir = temp_dir(name);
-    let summary =
-        with_threads(threads, || run_scenario(&scenario(), &common::checkpointed(&dir, EVERY)))
-            .unwrap();
+    let summary = with_threads(threads, || {
+        run_scenario(&scenario(), &common::checkpointed(&dir, EVERY))
+    })
+    .unwrap();
     assert_eq!(summary.steps, 16);
     dir
 }
@@ -96,7 +97,10 @@ fn assert_same_files(reference: &Path, other: &Path) {
 fn a_stopped_meshfree_run_resumes_bitwise_with_any_thread_count() {
     let reference = reference("ref", 2);
     let macro_csv = String::from_utf8(read(&reference.join("macro.csv"))).unwrap();
-    assert!(macro_csv.lines().any(|l| l.contains(",servo,")), "{macro_csv}");
+    assert!(
+        macro_csv.lines().any(|l| l.contains(",servo,")),
+        "{macro_csv}"
+    );
     // Stopped inside the servo phase between two rows, at a row, and in the isotropic phase;
     // resumed on 1 or 2 threads after running on 2 or 1.
     for (stop, before, after) in [(11, 2, 1), (12, 1, 2), (5, 2, 2)] {
@@ -121,16 +125,30 @@ fn a_stopped_meshfree_run_resumes_bitwise_with_any_thread_count() {
     let path = interrupted(&dir, 9, 1);
     let resumed = temp_dir("cli-out");
     let out = sdem()
-        .args(["resume", path.to_str().unwrap(), "--quiet", "--threads", "2"])
+        .args([
+            "resume",
+            path.to_str().unwrap(),
+            "--quiet",
+            "--threads",
+            "2",
+        ])
         .args(["--out", resumed.to_str().unwrap()])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_same_files(&reference, &resumed);
     // A finished run has nothing to resume.
     let done = AnyCheckpoint::read(&reference.join("checkpoint.bin")).unwrap();
-    let err = resume_run(&done, &reference.join("checkpoint.bin"), &RunOptions::default())
-        .unwrap_err();
+    let err = resume_run(
+        &done,
+        &reference.join("checkpoint.bin"),
+        &RunOptions::default(),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("nothing to resume"), "{err}");
 }
 
@@ -202,7 +220,10 @@ fn damaged_meshfree_checkpoints_are_refused_with_a_clear_error() {
     }
     refused(&dir, &fewer.to_bytes(), "10 displacements for the");
     let mut stranger = c.clone();
-    assert!(!stranger.last.elements.is_empty(), "no contacts at the checkpoint");
+    assert!(
+        !stranger.last.elements.is_empty(),
+        "no contacts at the checkpoint"
+    );
     stranger.last.elements[0].key.slave = 99;
     refused(&dir, &stranger.to_bytes(), "for 4 grains and 4 walls");
     let mut off_grid = c.clone();
@@ -211,8 +232,15 @@ fn damaged_meshfree_checkpoints_are_refused_with_a_clear_error() {
 
     // Each solver's reader refuses the other's checkpoints.
     let err = Checkpoint::read(&path).unwrap_err();
-    assert!(matches!(err, CheckpointError::OtherSolver { .. }), "{err:?}");
-    assert!(err.to_string().contains("a checkpoint of a run with the meshfree solver, not the SDEM"), "{err}");
+    assert!(
+        matches!(err, CheckpointError::OtherSolver { .. }),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string()
+            .contains("a checkpoint of a run with the meshfree solver, not the SDEM"),
+        "{err}"
+    );
     let sdem_dir = temp_dir("sdem");
     let mut options = common::checkpointed(&sdem_dir, 10);
     options.stop_after_step = Some(20);
@@ -220,7 +248,11 @@ fn damaged_meshfree_checkpoints_are_refused_with_a_clear_error() {
     let sdem_file = read(&sdem_dir.join("checkpoint.bin"));
     assert_eq!(sdem_file[8..12], SDEM_FORMAT_VERSION.to_le_bytes());
     let err = MeshfreeCheckpoint::from_bytes(&sdem_file, "sdem.bin").unwrap_err();
-    assert!(err.to_string().contains("with the SDEM solver, not the meshfree solver"), "{err}");
+    assert!(
+        err.to_string()
+            .contains("with the SDEM solver, not the meshfree solver"),
+        "{err}"
+    );
     assert!(matches!(
         AnyCheckpoint::from_bytes(&sdem_file, "sdem.bin"),
         Ok(AnyCheckpoint::Sdem(_))

@@ -26,6 +26,7 @@
 //! the contact search is exact and the sums are taken in a fixed order, so results do not
 //! depend on them.
 
+use super::meshfree_checkpoint::{MeshfreeCheckpoint, MeshfreeStored};
 use super::{Jamming, LoopState};
 use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
@@ -34,7 +35,6 @@ use crate::integration::{MAX_WALLS, StepTotals};
 use crate::scenario::{LoadedSample, Scenario};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
-use super::meshfree_checkpoint::{MeshfreeCheckpoint, MeshfreeStored};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -288,9 +288,16 @@ impl From<&LoadingProgram> for ProgramBits {
 impl ProgramBits {
     /// The program of the scenario's `phases` at this point; an error if the phase is not one
     /// of them.
-    pub fn to_program(&self, phases: &[crate::boundary::loading::Phase]) -> Result<LoadingProgram, String> {
+    pub fn to_program(
+        &self,
+        phases: &[crate::boundary::loading::Phase],
+    ) -> Result<LoadingProgram, String> {
         if self.current > phases.len() {
-            return Err(format!("loading phase {} of {}", self.current, phases.len()));
+            return Err(format!(
+                "loading phase {} of {}",
+                self.current,
+                phases.len()
+            ));
         }
         Ok(LoadingProgram {
             phases: phases.to_vec(),
@@ -623,8 +630,9 @@ impl AnyCheckpoint {
             .map_err(|e| corrupt(path, format!("payload: {e}")))?;
         match tagged {
             Payload::Sdem(s) => Checkpoint::from_stored(s).map(AnyCheckpoint::Sdem),
-            Payload::Meshfree(s) => MeshfreeCheckpoint::from_stored(*s)
-                .map(|c| AnyCheckpoint::Meshfree(Box::new(c))),
+            Payload::Meshfree(s) => {
+                MeshfreeCheckpoint::from_stored(*s).map(|c| AnyCheckpoint::Meshfree(Box::new(c)))
+            }
         }
         .map_err(|e| corrupt(path, e))
     }

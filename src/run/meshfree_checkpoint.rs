@@ -424,15 +424,14 @@ impl MeshfreeCheckpoint {
     /// Whether the stored state fits the scenario's assembly (rebuilt from the scenario): the
     /// number of walls and DoF, and the contact keys and DoF of the multipliers and elements.
     pub fn check_fits(&self, assembly: &Assembly) -> Result<(), String> {
-        let (grains, walls, dofs) = (
-            assembly.grains.len(),
-            assembly.walls.len(),
-            assembly.dofs(),
-        );
+        let (grains, walls, dofs) = (assembly.grains.len(), assembly.walls.len(), assembly.dofs());
         if self.walls.len() != walls {
             return Err(format!("{} walls, the box has {walls}", self.walls.len()));
         }
-        for (what, s) in [("state", &self.state), ("last good state", &self.last_good.1)] {
+        for (what, s) in [
+            ("state", &self.state),
+            ("last good state", &self.last_good.1),
+        ] {
             if s.u.len() != dofs {
                 return Err(format!(
                     "{what}: {} displacements for the {dofs} DoF of the scenario's grains",
@@ -441,7 +440,11 @@ impl MeshfreeCheckpoint {
             }
         }
         let key_ok = |k: &ContactKey| -> Result<(), String> {
-            let bad = || Err(format!("contact {k:?} for {grains} grains and {walls} walls"));
+            let bad = || {
+                Err(format!(
+                    "contact {k:?} for {grains} grains and {walls} walls"
+                ))
+            };
             let Some(slave) = assembly.grains.get(k.slave as usize) else {
                 return bad();
             };

@@ -30,8 +30,8 @@ use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
 use checkpoint::{AnyCheckpoint, Checkpoint, CheckpointError};
-use meshfree_checkpoint::MeshfreeCheckpoint;
 use glam::DVec2;
+use meshfree_checkpoint::MeshfreeCheckpoint;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -263,36 +263,23 @@ pub fn resume_run<C: Resumable + ?Sized>(
 /// A checkpoint that [`resume_run`] continues.
 pub trait Resumable {
     /// Continues the run (see [`resume_run`]).
-    fn resume(&self, checkpoint_path: &Path, options: &RunOptions)
-    -> Result<RunSummary, RunError>;
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError>;
 }
 
 impl Resumable for Checkpoint {
-    fn resume(
-        &self,
-        checkpoint_path: &Path,
-        options: &RunOptions,
-    ) -> Result<RunSummary, RunError> {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
         resume_sdem(self, checkpoint_path, options)
     }
 }
 
 impl Resumable for MeshfreeCheckpoint {
-    fn resume(
-        &self,
-        checkpoint_path: &Path,
-        options: &RunOptions,
-    ) -> Result<RunSummary, RunError> {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
         meshfree_checkpoint::resume_meshfree(self, checkpoint_path, options)
     }
 }
 
 impl Resumable for AnyCheckpoint {
-    fn resume(
-        &self,
-        checkpoint_path: &Path,
-        options: &RunOptions,
-    ) -> Result<RunSummary, RunError> {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
         match self {
             AnyCheckpoint::Sdem(c) => c.resume(checkpoint_path, options),
             AnyCheckpoint::Meshfree(c) => c.resume(checkpoint_path, options),
