@@ -569,7 +569,7 @@ impl Checkpoint {
     /// run's checkpoint is refused with [`CheckpointError::OtherSolver`] (see [`AnyCheckpoint`]).
     pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
         match AnyCheckpoint::from_bytes(bytes, path)? {
-            AnyCheckpoint::Sdem(c) => Ok(c),
+            AnyCheckpoint::Sdem(c) => Ok(*c),
             AnyCheckpoint::Meshfree(_) => Err(CheckpointError::OtherSolver {
                 path: path.to_string(),
                 found: "meshfree",
@@ -605,14 +605,14 @@ impl Checkpoint {
 /// A checkpoint of either solver, as `sdem resume` reads it.
 #[derive(Debug, Clone)]
 pub enum AnyCheckpoint {
-    Sdem(Checkpoint),
+    Sdem(Box<Checkpoint>),
     Meshfree(Box<MeshfreeCheckpoint>),
 }
 
 /// The payload of a version 2 file: the state, tagged by its solver.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub enum Payload {
-    Sdem(Stored),
+    Sdem(Box<Stored>),
     Meshfree(Box<MeshfreeStored>),
 }
 
@@ -622,14 +622,17 @@ impl AnyCheckpoint {
     pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
         let (version, payload) = unframe(bytes, path)?;
         if version == SDEM_FORMAT_VERSION {
-            return Checkpoint::decode_payload(payload, path).map(AnyCheckpoint::Sdem);
+            return Checkpoint::decode_payload(payload, path)
+                .map(|c| AnyCheckpoint::Sdem(Box::new(c)));
         }
         let text = payload_text(payload, path)?;
         let tagged: Payload = crate::scenario::ron_options()
             .from_str(text)
             .map_err(|e| corrupt(path, format!("payload: {e}")))?;
         match tagged {
-            Payload::Sdem(s) => Checkpoint::from_stored(s).map(AnyCheckpoint::Sdem),
+            Payload::Sdem(s) => {
+                Checkpoint::from_stored(*s).map(|c| AnyCheckpoint::Sdem(Box::new(c)))
+            }
             Payload::Meshfree(s) => {
                 MeshfreeCheckpoint::from_stored(*s).map(|c| AnyCheckpoint::Meshfree(Box::new(c)))
             }
