@@ -286,3 +286,38 @@ fn damaged_meshfree_checkpoints_are_refused_with_a_clear_error() {
     }
     eprintln!("fuzz: 300 damaged payloads, {decoded} still decoded");
 }
+
+/// A scenario that reads its discs from a sample file: the checkpoint holds them, and the run
+/// resumes bitwise after the file is gone.
+#[test]
+fn a_meshfree_run_from_a_sample_file_resumes_bitwise_without_the_file() {
+    let base = temp_dir("file");
+    std::fs::write(
+        base.join("discs.csv"),
+        "0.09,0.09,0.07\n0.25,0.1,0.065\n0.17,0.25,0.06\n",
+    )
+    .unwrap();
+    let text = SCENARIO
+        .replace(
+            "count: 4, box_width: 0.34, box_height: 0.34,\n             radii: Uniform(min: 0.06, max: 0.07)",
+            "box_width: 0.34, box_height: 0.34, file: \"discs.csv\"",
+        )
+        .replace("max_steps: 16", "max_steps: 8");
+    assert!(text.contains("discs.csv"));
+    std::fs::write(base.join("s.ron"), text).unwrap();
+    let (scenario, _) = Scenario::load(&base.join("s.ron")).unwrap();
+    let reference = base.join("ref");
+    run_scenario(&scenario, &common::checkpointed(&reference, EVERY)).unwrap();
+    let dir = base.join("stopped");
+    let mut options = common::checkpointed(&dir, EVERY);
+    options.stop_after_step = Some(5);
+    assert!(matches!(
+        run_scenario(&scenario, &options),
+        Err(RunError::Interrupted { step: 5, .. })
+    ));
+    std::fs::remove_file(base.join("discs.csv")).unwrap();
+    let path = dir.join("checkpoint.bin");
+    let c = AnyCheckpoint::read(&path).unwrap();
+    resume_run(&c, &path, &common::checkpointed(&dir, EVERY)).unwrap();
+    assert_same_files(&reference, &dir);
+}
