@@ -5,7 +5,7 @@ use clap::{Parser, Subcommand};
 use sdem::output::mcap::{McapSettings, TOPIC_GRAINS, Trajectory};
 use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
-use sdem::run::checkpoint::Checkpoint;
+use sdem::run::checkpoint::AnyCheckpoint;
 use sdem::run::{RunOptions, resume_run, run_scenario};
 use sdem::scenario::{CheckpointInterval, Scenario};
 use std::io::IsTerminal;
@@ -318,7 +318,7 @@ fn run(cli: Cli) -> Result<()> {
             checkpoint_every,
             checkpoint_every_seconds,
         } => {
-            let saved = Checkpoint::read(&checkpoint)?;
+            let saved = AnyCheckpoint::read(&checkpoint)?;
             let out_dir = out.unwrap_or_else(|| match checkpoint.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
                 _ => PathBuf::from("."),
@@ -326,15 +326,15 @@ fn run(cli: Cli) -> Result<()> {
             let pool = thread_pool(threads)?;
             eprintln!(
                 "sdem: resuming {} at step {} (t = {:.4e}), {}, output in {}",
-                saved.scenario.name,
-                saved.step,
-                saved.time,
+                saved.scenario().name,
+                saved.step(),
+                saved.time(),
                 thread_count(&pool),
                 out_dir.display()
             );
             let terminal = std::io::stderr().is_terminal();
             let (every, seconds) = match (checkpoint_every, checkpoint_every_seconds) {
-                (None, None) => (saved.checkpoint_every, saved.checkpoint_seconds),
+                (None, None) => saved.checkpoint_interval(),
                 (steps, seconds) => checkpoint_interval(steps, seconds, None),
             };
             let options = RunOptions {

@@ -6,10 +6,17 @@
 //! | bytes | what |
 //! | --- | --- |
 //! | 8 | magic `SDEMCKPT` |
-//! | 4 | format version (u32, [`FORMAT_VERSION`]) |
+//! | 4 | format version (u32: [`SDEM_FORMAT_VERSION`] or [`FORMAT_VERSION`]) |
 //! | 8 | payload length in bytes (u64) |
 //! | 4 | CRC-32 (IEEE) of the payload (u32) |
-//! | n | payload: RON text of [`Checkpoint`] (UTF-8) |
+//! | n | payload: RON text (UTF-8) |
+//!
+//! The payload of a version 1 file is the SDEM state ([`Stored`]). Version 2 tags the payload
+//! with its solver: `Sdem((...))` (the same fields) or `Meshfree((...))` (a meshfree run's
+//! state, [`super::meshfree_checkpoint::MeshfreeStored`]). SDEM checkpoints are still written
+//! as version 1, byte for byte as before, so that older sdem resume them; meshfree checkpoints
+//! are written as version 2, which older sdem refuse by their version. [`AnyCheckpoint`] reads
+//! both solvers' files; [`Checkpoint`] is the SDEM one.
 //!
 //! Every f64 of the state (grains, walls, time, totals, runner state) is stored as its IEEE bit
 //! pattern (u64), so the round trip is exact whatever the float printer does (-0.0, subnormals,
@@ -19,6 +26,7 @@
 //! the contact search is exact and the sums are taken in a fixed order, so results do not
 //! depend on them.
 
+use super::meshfree_checkpoint::{MeshfreeCheckpoint, MeshfreeStored};
 use super::{Jamming, LoopState};
 use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
@@ -31,7 +39,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub const MAGIC: &[u8; 8] = b"SDEMCKPT";
-pub const FORMAT_VERSION: u32 = 1;
+/// The newest format version this sdem reads (and writes for meshfree runs).
+pub const FORMAT_VERSION: u32 = 2;
+/// The format version of SDEM checkpoints (unchanged since the first one).
+pub const SDEM_FORMAT_VERSION: u32 = 1;
 const HEADER_LEN: usize = 8 + 4 + 8 + 4;
 /// The file name of the latest checkpoint in a run directory.
 pub const FILE_NAME: &str = "checkpoint.bin";
@@ -45,7 +56,9 @@ pub enum CheckpointError {
     },
     #[error("{path}: not an sdem checkpoint (no SDEMCKPT magic)")]
     NotACheckpoint { path: String },
-    #[error("{path}: checkpoint format version {found}, this sdem reads version {expected} only")]
+    #[error(
+        "{path}: checkpoint format version {found}, this sdem reads versions 1 to {expected} only"
+    )]
     Version {
         path: String,
         found: u32,
@@ -59,6 +72,13 @@ pub enum CheckpointError {
     },
     #[error("{path}: corrupt checkpoint ({reason})")]
     Corrupt { path: String, reason: String },
+    /// A checkpoint of another solver than the one asked for (read it with [`AnyCheckpoint`]).
+    #[error("{path}: a checkpoint of a run with the {found} solver, not the {expected} solver")]
+    OtherSolver {
+        path: String,
+        found: &'static str,
+        expected: &'static str,
+    },
 }
 
 /// An f64 stored as its bit pattern.
@@ -253,6 +273,46 @@ pub struct ProgramBits {
     pub rate: Bits,
 }
 
+impl From<&LoadingProgram> for ProgramBits {
+    fn from(p: &LoadingProgram) -> Self {
+        ProgramBits {
+            current: p.current,
+            phase_start_step: p.phase_start_step,
+            phase_start_time: p.phase_start_time.into(),
+            phase_start_size: [p.phase_start_size.0.into(), p.phase_start_size.1.into()],
+            rate: p.rate.into(),
+        }
+    }
+}
+
+impl ProgramBits {
+    /// The program of the scenario's `phases` at this point; an error if the phase is not one
+    /// of them.
+    pub fn to_program(
+        &self,
+        phases: &[crate::boundary::loading::Phase],
+    ) -> Result<LoadingProgram, String> {
+        if self.current > phases.len() {
+            return Err(format!(
+                "loading phase {} of {}",
+                self.current,
+                phases.len()
+            ));
+        }
+        Ok(LoadingProgram {
+            phases: phases.to_vec(),
+            current: self.current,
+            phase_start_step: self.phase_start_step,
+            phase_start_time: self.phase_start_time.into(),
+            phase_start_size: (
+                self.phase_start_size[0].into(),
+                self.phase_start_size[1].into(),
+            ),
+            rate: self.rate.into(),
+        })
+    }
+}
+
 /// Everything an SDEM run carries from one step to the next, besides the world: the run loop's
 /// [`LoopState`] and the SDEM solver's last good grains and grain levels.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -372,13 +432,7 @@ impl Checkpoint {
             grains: grains_bits(&self.grains),
             walls: self.walls.iter().map(WallBits::from).collect(),
             totals: (&self.totals).into(),
-            program: ProgramBits {
-                current: p.current,
-                phase_start_step: p.phase_start_step,
-                phase_start_time: p.phase_start_time.into(),
-                phase_start_size: [p.phase_start_size.0.into(), p.phase_start_size.1.into()],
-                rate: p.rate.into(),
-            },
+            program: p.into(),
             confirmed_jamming: r.confirmed_jamming.as_ref().map(JammingBits::from),
             candidate: r.candidate.as_ref().map(JammingBits::from),
             max_loaded_inertial_number: r.max_loaded_inertial_number.into(),
@@ -503,81 +557,34 @@ impl Checkpoint {
         })
     }
 
-    /// The file's bytes.
+    /// The file's bytes (format version [`SDEM_FORMAT_VERSION`]).
     pub fn to_bytes(&self) -> Vec<u8> {
         let payload = ron::Options::default()
             .to_string(&self.to_stored())
             .expect("a checkpoint is always serializable");
-        let payload = payload.into_bytes();
-        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
-        out.extend_from_slice(MAGIC);
-        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        out.extend_from_slice(&crc32(&payload).to_le_bytes());
-        out.extend_from_slice(&payload);
-        out
+        framed(SDEM_FORMAT_VERSION, payload.into_bytes())
     }
 
-    /// Decodes a file's bytes; `path` only names the file in errors. Never panics.
+    /// Decodes a file's bytes; `path` only names the file in errors. Never panics. A meshfree
+    /// run's checkpoint is refused with [`CheckpointError::OtherSolver`] (see [`AnyCheckpoint`]).
     pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
-        let path = path.to_string();
-        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
-            return Err(CheckpointError::NotACheckpoint { path });
+        match AnyCheckpoint::from_bytes(bytes, path)? {
+            AnyCheckpoint::Sdem(c) => Ok(*c),
+            AnyCheckpoint::Meshfree(_) => Err(CheckpointError::OtherSolver {
+                path: path.to_string(),
+                found: "meshfree",
+                expected: "SDEM",
+            }),
         }
-        if bytes.len() < HEADER_LEN {
-            return Err(CheckpointError::Truncated {
-                path,
-                found: bytes.len() as u64,
-                expected: HEADER_LEN as u64,
-            });
-        }
-        let u32_at = |k: usize| u32::from_le_bytes(bytes[k..k + 4].try_into().unwrap_or([0; 4]));
-        let version = u32_at(8);
-        if version != FORMAT_VERSION {
-            return Err(CheckpointError::Version {
-                path,
-                found: version,
-                expected: FORMAT_VERSION,
-            });
-        }
-        let length = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or([0; 8]));
-        let crc = u32_at(20);
-        let expected = (HEADER_LEN as u64).saturating_add(length);
-        let found = bytes.len() as u64;
-        if found < expected {
-            return Err(CheckpointError::Truncated {
-                path,
-                found,
-                expected,
-            });
-        }
-        if found > expected {
-            return Err(CheckpointError::Corrupt {
-                path,
-                reason: format!("{} trailing bytes", found - expected),
-            });
-        }
-        let payload = &bytes[HEADER_LEN..];
-        if crc32(payload) != crc {
-            return Err(CheckpointError::Corrupt {
-                path,
-                reason: "checksum mismatch".into(),
-            });
-        }
-        Self::decode_payload(payload, &path)
     }
 
-    /// Decodes a payload (after the header checks). Never panics.
+    /// Decodes a version 1 payload (after the header checks). Never panics.
     pub fn decode_payload(payload: &[u8], path: &str) -> Result<Self, CheckpointError> {
-        let corrupt = |reason: String| CheckpointError::Corrupt {
-            path: path.to_string(),
-            reason,
-        };
-        let text = std::str::from_utf8(payload).map_err(|e| corrupt(format!("not UTF-8: {e}")))?;
+        let text = payload_text(payload, path)?;
         let stored: Stored = crate::scenario::ron_options()
             .from_str(text)
-            .map_err(|e| corrupt(format!("payload: {e}")))?;
-        Self::from_stored(stored).map_err(corrupt)
+            .map_err(|e| corrupt(path, format!("payload: {e}")))?;
+        Self::from_stored(stored).map_err(|e| corrupt(path, e))
     }
 
     pub fn read(path: &Path) -> Result<Self, CheckpointError> {
@@ -591,23 +598,180 @@ impl Checkpoint {
 
     /// Writes atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the directory.
     pub fn write_atomic(&self, path: &Path) -> std::io::Result<()> {
-        let tmp = tmp_path(path);
-        {
-            let mut f = std::fs::File::create(&tmp)?;
-            f.write_all(&self.to_bytes())?;
-            f.sync_all()?;
-        }
-        std::fs::rename(&tmp, path)?;
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        // Directory fsync makes the rename durable; not every platform allows opening one.
-        if let Ok(d) = std::fs::File::open(&dir) {
-            d.sync_all().ok();
-        }
-        Ok(())
+        write_atomic(path, &self.to_bytes())
     }
+}
+
+/// A checkpoint of either solver, as `sdem resume` reads it.
+#[derive(Debug, Clone)]
+pub enum AnyCheckpoint {
+    Sdem(Box<Checkpoint>),
+    Meshfree(Box<MeshfreeCheckpoint>),
+}
+
+/// The payload of a version 2 file: the state, tagged by its solver.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Payload {
+    Sdem(Box<Stored>),
+    Meshfree(Box<MeshfreeStored>),
+}
+
+impl AnyCheckpoint {
+    /// Decodes a file's bytes (either version, either solver); `path` only names the file in
+    /// errors. Never panics.
+    pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
+        let (version, payload) = unframe(bytes, path)?;
+        if version == SDEM_FORMAT_VERSION {
+            return Checkpoint::decode_payload(payload, path)
+                .map(|c| AnyCheckpoint::Sdem(Box::new(c)));
+        }
+        let text = payload_text(payload, path)?;
+        let tagged: Payload = crate::scenario::ron_options()
+            .from_str(text)
+            .map_err(|e| corrupt(path, format!("payload: {e}")))?;
+        match tagged {
+            Payload::Sdem(s) => {
+                Checkpoint::from_stored(*s).map(|c| AnyCheckpoint::Sdem(Box::new(c)))
+            }
+            Payload::Meshfree(s) => {
+                MeshfreeCheckpoint::from_stored(*s).map(|c| AnyCheckpoint::Meshfree(Box::new(c)))
+            }
+        }
+        .map_err(|e| corrupt(path, e))
+    }
+
+    pub fn read(path: &Path) -> Result<Self, CheckpointError> {
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &name)
+    }
+
+    /// The run's scenario.
+    pub fn scenario(&self) -> &Scenario {
+        match self {
+            AnyCheckpoint::Sdem(c) => &c.scenario,
+            AnyCheckpoint::Meshfree(c) => &c.scenario,
+        }
+    }
+
+    /// The step the checkpoint was written at.
+    pub fn step(&self) -> u64 {
+        match self {
+            AnyCheckpoint::Sdem(c) => c.step,
+            AnyCheckpoint::Meshfree(c) => c.step,
+        }
+    }
+
+    /// The simulated time at that step.
+    pub fn time(&self) -> f64 {
+        match self {
+            AnyCheckpoint::Sdem(c) => c.time,
+            AnyCheckpoint::Meshfree(c) => c.state.time,
+        }
+    }
+
+    /// The run's checkpoint intervals (steps, seconds): the defaults of `sdem resume`.
+    pub fn checkpoint_interval(&self) -> (u64, Option<f64>) {
+        match self {
+            AnyCheckpoint::Sdem(c) => (c.checkpoint_every, c.checkpoint_seconds),
+            AnyCheckpoint::Meshfree(c) => (c.checkpoint_every, c.checkpoint_seconds),
+        }
+    }
+}
+
+fn corrupt(path: &str, reason: String) -> CheckpointError {
+    CheckpointError::Corrupt {
+        path: path.to_string(),
+        reason,
+    }
+}
+
+fn payload_text<'p>(payload: &'p [u8], path: &str) -> Result<&'p str, CheckpointError> {
+    std::str::from_utf8(payload).map_err(|e| corrupt(path, format!("not UTF-8: {e}")))
+}
+
+/// Header and payload: the bytes of a file.
+pub(crate) fn framed(version: u32, payload: Vec<u8>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&version.to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&crc32(&payload).to_le_bytes());
+    out.extend_from_slice(&payload);
+    out
+}
+
+/// Checks a file's header (magic, version, length, checksum): its version and payload.
+fn unframe<'b>(bytes: &'b [u8], path: &str) -> Result<(u32, &'b [u8]), CheckpointError> {
+    let path = path.to_string();
+    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+        return Err(CheckpointError::NotACheckpoint { path });
+    }
+    if bytes.len() < HEADER_LEN {
+        return Err(CheckpointError::Truncated {
+            path,
+            found: bytes.len() as u64,
+            expected: HEADER_LEN as u64,
+        });
+    }
+    let u32_at = |k: usize| u32::from_le_bytes(bytes[k..k + 4].try_into().unwrap_or([0; 4]));
+    let version = u32_at(8);
+    if version == 0 || version > FORMAT_VERSION {
+        return Err(CheckpointError::Version {
+            path,
+            found: version,
+            expected: FORMAT_VERSION,
+        });
+    }
+    let length = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or([0; 8]));
+    let crc = u32_at(20);
+    let expected = (HEADER_LEN as u64).saturating_add(length);
+    let found = bytes.len() as u64;
+    if found < expected {
+        return Err(CheckpointError::Truncated {
+            path,
+            found,
+            expected,
+        });
+    }
+    if found > expected {
+        return Err(CheckpointError::Corrupt {
+            path,
+            reason: format!("{} trailing bytes", found - expected),
+        });
+    }
+    let payload = &bytes[HEADER_LEN..];
+    if crc32(payload) != crc {
+        return Err(CheckpointError::Corrupt {
+            path,
+            reason: "checksum mismatch".into(),
+        });
+    }
+    Ok((version, payload))
+}
+
+/// Writes `bytes` to `path` atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the
+/// directory.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = tmp_path(path);
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    // Directory fsync makes the rename durable; not every platform allows opening one.
+    if let Ok(d) = std::fs::File::open(&dir) {
+        d.sync_all().ok();
+    }
+    Ok(())
 }
 
 fn tmp_path(path: &Path) -> PathBuf {

@@ -434,15 +434,7 @@ impl Simulation for Meshfree {
     }
 
     fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {
-        let _ = run;
-        Err(std::io::Error::new(
-            std::io::ErrorKind::Unsupported,
-            format!(
-                "{}: checkpoints of meshfree runs are not implemented yet (run without \
-                 --checkpoint-every)",
-                path.display()
-            ),
-        ))
+        super::meshfree_checkpoint::MeshfreeCheckpoint::capture(self, run).write_atomic(path)
     }
 }
 
@@ -471,4 +463,24 @@ pub fn run_meshfree(
         options,
         None,
     )
+}
+
+impl Meshfree {
+    /// The run of a checkpoint at its step: the grains' models rebuilt from the scenario (as
+    /// [`Meshfree::new`] builds them), the dynamic state and the last step's evaluation and
+    /// counters the checkpoint's. A state that does not fit the rebuilt grains (a damaged
+    /// checkpoint) is a [`RunError::Resume`] saying why.
+    pub(crate) fn restore(
+        c: &super::meshfree_checkpoint::MeshfreeCheckpoint,
+    ) -> Result<Self, RunError> {
+        let mut sim = Self::new(&c.scenario)?;
+        c.check_fits(&sim.assembly).map_err(RunError::Resume)?;
+        sim.assembly.walls = c.walls.clone();
+        sim.state = c.state.clone();
+        sim.step = c.step;
+        sim.last = c.last.clone();
+        sim.stats = c.stats;
+        sim.last_good = c.last_good.clone();
+        Ok(sim)
+    }
 }

@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod checkpoint;
 pub mod meshfree;
+pub mod meshfree_checkpoint;
 mod progress;
 pub mod sdem;
 pub mod simulation;
@@ -28,8 +29,9 @@ use crate::output::Measures;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
-use checkpoint::{Checkpoint, CheckpointError};
+use checkpoint::{AnyCheckpoint, Checkpoint, CheckpointError};
 use glam::DVec2;
+use meshfree_checkpoint::MeshfreeCheckpoint;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -239,17 +241,69 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     )
 }
 
-/// Continues the run of a checkpoint (see [`checkpoint`]) in `options.out_dir`: `macro.csv`
+/// Continues the run of a checkpoint (see [`checkpoint`]), SDEM ([`Checkpoint`]), meshfree
+/// ([`MeshfreeCheckpoint`]) or either ([`AnyCheckpoint`]), in `options.out_dir`: `macro.csv`
 /// there is cut back to the rows written up to the checkpoint's step, then appended to. When
 /// the output directory has no `macro.csv` but `checkpoint_path`'s directory has one, it is
 /// copied first.
 ///
-/// An MCAP log (`options.mcap`) is continued when its file exists: the frames written up to the
+/// An MCAP log (SDEM runs only) (`options.mcap`) is continued when its file exists: the frames written up to the
 /// checkpoint are read back from it (finished or left unfinished by a killed process) and the
 /// run goes on after them in a temporary file that replaces it (see
 /// [`TrajectoryWriter::continue_log`]), so that it ends up holding exactly the frames of the
 /// uninterrupted run. When the file does not exist, a new log holds the continued part only.
-pub fn resume_run(
+pub fn resume_run<C: Resumable + ?Sized>(
+    checkpoint: &C,
+    checkpoint_path: &Path,
+    options: &RunOptions,
+) -> Result<RunSummary, RunError> {
+    checkpoint.resume(checkpoint_path, options)
+}
+
+/// A checkpoint that [`resume_run`] continues.
+pub trait Resumable {
+    /// Continues the run (see [`resume_run`]).
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError>;
+}
+
+impl Resumable for Checkpoint {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
+        resume_sdem(self, checkpoint_path, options)
+    }
+}
+
+impl Resumable for MeshfreeCheckpoint {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
+        meshfree_checkpoint::resume_meshfree(self, checkpoint_path, options)
+    }
+}
+
+impl Resumable for AnyCheckpoint {
+    fn resume(&self, checkpoint_path: &Path, options: &RunOptions) -> Result<RunSummary, RunError> {
+        match self {
+            AnyCheckpoint::Sdem(c) => c.resume(checkpoint_path, options),
+            AnyCheckpoint::Meshfree(c) => c.resume(checkpoint_path, options),
+        }
+    }
+}
+
+/// The `macro.csv` a resumed run continues: the one in `out`, copied first from the
+/// checkpoint's directory when `out` has none.
+pub(crate) fn macro_to_continue(out: &Path, checkpoint_path: &Path) -> Result<PathBuf, RunError> {
+    let macro_path = out.join("macro.csv");
+    if !macro_path.exists() {
+        let source = checkpoint_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("macro.csv");
+        if source.exists() {
+            std::fs::copy(&source, &macro_path).map_err(io_error(&macro_path))?;
+        }
+    }
+    Ok(macro_path)
+}
+
+fn resume_sdem(
     checkpoint: &Checkpoint,
     checkpoint_path: &Path,
     options: &RunOptions,
@@ -265,16 +319,7 @@ pub fn resume_run(
     let scenario = &c.scenario;
     let out = &options.out_dir;
     std::fs::create_dir_all(out).map_err(io_error(out))?;
-    let macro_path = out.join("macro.csv");
-    if !macro_path.exists() {
-        let source = checkpoint_path
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("macro.csv");
-        if source.exists() {
-            std::fs::copy(&source, &macro_path).map_err(io_error(&macro_path))?;
-        }
-    }
+    let macro_path = macro_to_continue(out, checkpoint_path)?;
     // A macro.csv of an sdem without the level columns is upgraded: every grain of a run
     // without the adaptive level is at the scenario's level.
     let fixed_levels = scenario.model.adaptive().is_none().then(|| {
