@@ -75,8 +75,8 @@ pub struct Evaluation {
     /// on the Newton tolerance.
     pub force_scale: f64,
     /// Each grain's tangent blocks (internal, inertia, damping) on its pattern, when the
-    /// evaluation was asked for the tangent.
-    grain_blocks: Vec<Vec<[f64; 4]>>,
+    /// evaluation was asked for the tangent (empty otherwise).
+    pub grain_blocks: Vec<Vec<[f64; 4]>>,
 }
 
 impl Evaluation {
@@ -186,14 +186,14 @@ pub struct Assembly {
 /// of the elements met since the last reset, so that the triplets' index sequence (and with it
 /// the sparse solver's symbolic analysis) stays the same while the active contacts change
 /// within it. Pairs of elements that have become inactive stay with zero values until the
-/// pattern is trimmed at the start of a step (when more than half of it is stale).
+/// pattern is cleared at the start of the next step: the pattern, which decides the pivots of
+/// the factorization and hence the last bits of the solution, then depends on the step's own
+/// iterations only, and a run resumed from a checkpoint continues bit for bit.
 #[derive(Debug, Default)]
 struct ContactPattern {
     /// (x DoF of the row node, x DoF of the column node), sorted.
     pairs: Vec<(usize, usize)>,
     slot: std::collections::HashMap<(usize, usize), usize>,
-    /// Pairs the last gathered elements used.
-    used: usize,
 }
 
 impl ContactPattern {
@@ -220,29 +220,22 @@ impl ContactPattern {
             self.slot = self.pairs.iter().enumerate().map(|(k, &p)| (p, k)).collect();
         }
         let mut values = vec![[0.0; 4]; self.pairs.len()];
-        let mut touched = vec![false; self.pairs.len()];
         for e in elements {
             let n = e.dofs.len();
             for (p, q, key) in node_pairs(e) {
-                let s = self.slot[&key];
-                touched[s] = true;
-                let blk = &mut values[s];
+                let blk = &mut values[self.slot[&key]];
                 blk[0] -= e.stiffness[(2 * p) * n + 2 * q];
                 blk[1] -= e.stiffness[(2 * p + 1) * n + 2 * q];
                 blk[2] -= e.stiffness[(2 * p) * n + 2 * q + 1];
                 blk[3] -= e.stiffness[(2 * p + 1) * n + 2 * q + 1];
             }
         }
-        self.used = touched.iter().filter(|&&t| t).count();
         values
     }
 
-    /// Forgets the pattern when more than half of it is stale.
-    fn trim(&mut self) {
-        if self.pairs.len() > 2 * self.used {
-            self.pairs.clear();
-            self.slot.clear();
-        }
+    fn clear(&mut self) {
+        self.pairs.clear();
+        self.slot.clear();
     }
 }
 
@@ -784,7 +777,7 @@ impl Assembly {
         dt: f64,
         scheme: TimeScheme,
     ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
-        self.contact_pattern.trim();
+        self.contact_pattern.clear();
         let walls0 = self.walls.clone();
         let (u0, v0, a0) = (&state.u, &state.v, &state.a);
         let mut stats = SolveStats::default();

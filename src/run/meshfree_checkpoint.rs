@@ -225,6 +225,7 @@ impl EvaluationBits {
             elements,
             elastic_energy: self.elastic_energy.into(),
             force_scale: self.force_scale.into(),
+            grain_blocks: Vec::new(),
         })
     }
 }
