@@ -12,6 +12,18 @@
 //! | `/macro` | `sdem_msgs/msg/Macro` (ros2msg) | cdr | the row of `macro.csv` |
 //! | `/scene` | `foxglove.SceneUpdate` (jsonschema) | json | grains as flat ellipses (scaled cylinders) coloured by mean stress, and the box |
 //!
+//! A meshfree run (`model: Meshfree(...)`) writes `/contours` in place of `/grains` and
+//! `/contacts`, with the same `/walls`, `/macro` and `/scene` (its metadata `sdem.run` has
+//! `solver=meshfree`; see [`contours`] for the details):
+//!
+//! | topic | schema (encoding) | message encoding | content |
+//! | --- | --- | --- | --- |
+//! | `/contours` | `sdem_msgs/msg/Contours` (ros2msg) | cdr | per grain: id, mean Cauchy stress (tension positive), `mean_stress_c` (compression positive), point count; then the boundary nodes of all grains (x, y columns, counter-clockwise), f64 |
+//! | `/scene` | `foxglove.SceneUpdate` (jsonschema) | json | each contour as a triangle fan filled with the colour of its mean stress, outlined by a line loop, and the box |
+//!
+//! A frame is a message on `/grains` (SDEM) or `/contours` (meshfree); [`Frame::contours`] is
+//! `Some` for the latter, with [`Frame::grains`] and [`Frame::contacts`] empty.
+//!
 //! The bulk channels are little-endian CDR (XCDR1, `CDR_LE`) described by ROS 2 `.msg` schemas:
 //! a standard, self-describing layout that Foxglove decodes natively and any reader can parse
 //! from the schema text (see `tools/check_mcap.py`). Arrays are columns indexed by grain id (the
@@ -43,7 +55,7 @@ use std::io::{BufWriter, Read, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-mod contours;
+pub mod contours;
 mod resume;
 pub use contours::{
     CONTOUR_SCENE_SCHEMA, CONTOURS_MSG, ContourLogInfo, FrameContour, SCHEMA_CONTOURS,
@@ -942,7 +954,15 @@ impl TrajectoryWriter {
             path: path.clone(),
             error,
         };
-        let grains = add_channel(&mut inner, &path, TOPIC_GRAINS, SCHEMA_GRAINS, "ros2msg", GRAINS_MSG, "cdr")?;
+        let grains = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_GRAINS,
+            SCHEMA_GRAINS,
+            "ros2msg",
+            GRAINS_MSG,
+            "cdr",
+        )?;
         let contacts = add_channel(
             &mut inner,
             &path,
@@ -952,8 +972,24 @@ impl TrajectoryWriter {
             CONTACTS_MSG,
             "cdr",
         )?;
-        let walls = add_channel(&mut inner, &path, TOPIC_WALLS, SCHEMA_WALLS, "ros2msg", WALLS_MSG, "cdr")?;
-        let macro_row = add_channel(&mut inner, &path, TOPIC_MACRO, SCHEMA_MACRO, "ros2msg", MACRO_MSG, "cdr")?;
+        let walls = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
+        )?;
+        let macro_row = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
+        )?;
         let scene = add_channel(
             &mut inner,
             &path,
@@ -1032,8 +1068,22 @@ impl TrajectoryWriter {
     fn channel_table(&self) -> Vec<ChannelRow> {
         let mut table = match self.bodies {
             Bodies::Ellipses { grains, contacts } => vec![
-                (grains, TOPIC_GRAINS, SCHEMA_GRAINS, "ros2msg", GRAINS_MSG, "cdr"),
-                (contacts, TOPIC_CONTACTS, SCHEMA_CONTACTS, "ros2msg", CONTACTS_MSG, "cdr"),
+                (
+                    grains,
+                    TOPIC_GRAINS,
+                    SCHEMA_GRAINS,
+                    "ros2msg",
+                    GRAINS_MSG,
+                    "cdr",
+                ),
+                (
+                    contacts,
+                    TOPIC_CONTACTS,
+                    SCHEMA_CONTACTS,
+                    "ros2msg",
+                    CONTACTS_MSG,
+                    "cdr",
+                ),
             ],
             Bodies::Contours { contours: id } => vec![(
                 id,
@@ -1044,13 +1094,34 @@ impl TrajectoryWriter {
                 "cdr",
             )],
         };
-        table.push((self.walls, TOPIC_WALLS, SCHEMA_WALLS, "ros2msg", WALLS_MSG, "cdr"));
-        table.push((self.macro_row, TOPIC_MACRO, SCHEMA_MACRO, "ros2msg", MACRO_MSG, "cdr"));
+        table.push((
+            self.walls,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
+        ));
+        table.push((
+            self.macro_row,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
+        ));
         let scene_schema = match self.bodies {
             Bodies::Ellipses { .. } => SCENE_SCHEMA,
             Bodies::Contours { .. } => contours::CONTOUR_SCENE_SCHEMA,
         };
-        table.push((self.scene, TOPIC_SCENE, SCHEMA_SCENE, "jsonschema", scene_schema, "json"));
+        table.push((
+            self.scene,
+            TOPIC_SCENE,
+            SCHEMA_SCENE,
+            "jsonschema",
+            scene_schema,
+            "json",
+        ));
         table
     }
 
@@ -1757,7 +1828,10 @@ impl Trajectory {
 
     /// Log times (ns) of the frames.
     pub fn frame_log_times(&self) -> Vec<u64> {
-        self.refs(self.frame_topic).iter().map(|m| m.log_time).collect()
+        self.refs(self.frame_topic)
+            .iter()
+            .map(|m| m.log_time)
+            .collect()
     }
 
     /// Resolves a frame number: `k >= 0` from the start, `k < 0` from the end (-1: the last).

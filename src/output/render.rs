@@ -313,8 +313,11 @@ fn draw_polygon<DB: DrawingBackend>(
     if outlined {
         let mut closed = pixels;
         closed.push(closed[0]);
-        root.draw(&PathElement::new(closed, RGBColor(25, 25, 25).stroke_width(1)))
-            .map_err(err)?;
+        root.draw(&PathElement::new(
+            closed,
+            RGBColor(25, 25, 25).stroke_width(1),
+        ))
+        .map_err(err)?;
     }
     Ok(())
 }
@@ -358,7 +361,13 @@ fn draw_contours<DB: DrawingBackend>(
             continue;
         }
         let r_px = c.equivalent_radius() * layout.scale;
-        draw_polygon(root, &polygon, stress_colour(means[k], layout), r_px >= 4.0, layout)?;
+        draw_polygon(
+            root,
+            &polygon,
+            stress_colour(means[k], layout),
+            r_px >= 4.0,
+            layout,
+        )?;
     }
     Ok(())
 }
@@ -391,7 +400,13 @@ fn draw_ellipses<DB: DrawingBackend>(
         if polygon.len() < 3 {
             continue;
         }
-        draw_polygon(root, &polygon, stress_colour(means[k], layout), r_px >= 4.0, layout)?;
+        draw_polygon(
+            root,
+            &polygon,
+            stress_colour(means[k], layout),
+            r_px >= 4.0,
+            layout,
+        )?;
     }
     Ok(())
 }

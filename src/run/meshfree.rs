@@ -296,7 +296,11 @@ impl Meshfree {
         let u = self.assembly.grain_slice(u, g);
         let (area, centroid) = model.contour_area_centroid(u);
         let s = model.stress_integral(u)?;
-        let stress = [s[0][0] / area, s[1][1] / area, 0.5 * (s[0][1] + s[1][0]) / area];
+        let stress = [
+            s[0][0] / area,
+            s[1][1] / area,
+            0.5 * (s[0][1] + s[1][0]) / area,
+        ];
         Ok(GrainMean {
             area,
             centroid,
@@ -488,7 +492,12 @@ impl Simulation for Meshfree {
         }
         let info = ContourLogInfo {
             grains: self.assembly.grains.len(),
-            boundary_nodes: self.assembly.grains.iter().map(|m| m.nodes.boundary_count).sum(),
+            boundary_nodes: self
+                .assembly
+                .grains
+                .iter()
+                .map(|m| m.nodes.boundary_count)
+                .sum(),
             dt: self.dt,
         };
         TrajectoryWriter::create_contours(settings, scenario, &info)
@@ -500,7 +509,13 @@ impl Simulation for Meshfree {
             path: String::new(),
             error: std::io::Error::other(format!("meshfree contours at step {}: {e}", self.step)),
         })?;
-        log.write_contour_frame(self.step, self.state.time, &contours, &self.assembly.walls, row)
+        log.write_contour_frame(
+            self.step,
+            self.state.time,
+            &contours,
+            &self.assembly.walls,
+            row,
+        )
     }
 
     fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {

@@ -10,10 +10,10 @@
 //! centroid filled with the colour of its mean stress, outlined by a line loop.
 
 use super::{
-    Bodies, CdrReader, CdrResult, CdrWriter, FORMAT_VERSION, McapSettings,
-    SCHEMA_MACRO, SCHEMA_SCENE, SCHEMA_WALLS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS,
-    TrajectoryWriter, MACRO_MSG, WALLS_MSG, WriteError, add_channel, attach_scenario,
-    encode_box, encode_macro, encode_walls, json_time, length_decimals, num, stress_colour_max,
+    Bodies, CdrReader, CdrResult, CdrWriter, FORMAT_VERSION, MACRO_MSG, McapSettings, SCHEMA_MACRO,
+    SCHEMA_SCENE, SCHEMA_WALLS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, TrajectoryWriter, WALLS_MSG,
+    WriteError, add_channel, attach_scenario, encode_box, encode_macro, encode_walls, json_time,
+    length_decimals, num, stress_colour_max,
 };
 use crate::boundary::walls::Wall;
 use crate::output::measures::Measures;
@@ -135,8 +135,14 @@ pub(super) fn encode_contours(buf: &mut Vec<u8>, step: u64, time: f64, contours:
     }
     w.f64_seq(n, contours.iter().map(|c| c.mean_stress_c));
     w.u32_seq(n, contours.iter().map(|c| c.points.len() as u32));
-    w.f64_seq(points, contours.iter().flat_map(|c| c.points.iter().map(|p| p.x)));
-    w.f64_seq(points, contours.iter().flat_map(|c| c.points.iter().map(|p| p.y)));
+    w.f64_seq(
+        points,
+        contours.iter().flat_map(|c| c.points.iter().map(|p| p.x)),
+    );
+    w.f64_seq(
+        points,
+        contours.iter().flat_map(|c| c.points.iter().map(|p| p.y)),
+    );
 }
 
 pub(super) fn decode_contours(data: &[u8]) -> CdrResult<(u64, f64, Vec<FrameContour>)> {
@@ -233,7 +239,9 @@ pub(super) fn encode_contour_scene(
             }
             point(out, p);
         }
-        out.push_str("],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}");
+        out.push_str(
+            "],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}",
+        );
     }
     out.push_str("],\"triangles\":[");
     // Fills: a fan from the area centroid (point 0) over the contour's edges.
@@ -296,10 +304,22 @@ impl TrajectoryWriter {
             "cdr",
         )?;
         let walls = add_channel(
-            &mut inner, &path, TOPIC_WALLS, SCHEMA_WALLS, "ros2msg", WALLS_MSG, "cdr",
+            &mut inner,
+            &path,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
         )?;
         let macro_row = add_channel(
-            &mut inner, &path, TOPIC_MACRO, SCHEMA_MACRO, "ros2msg", MACRO_MSG, "cdr",
+            &mut inner,
+            &path,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
         )?;
         let scene = add_channel(
             &mut inner,
@@ -429,7 +449,11 @@ mod tests {
         let contours = vec![
             square(0, DVec2::ZERO, 1.0),
             FrameContour {
-                points: vec![DVec2::new(3.0, 0.0), DVec2::new(4.0, 0.0), DVec2::new(3.5, 1.0)],
+                points: vec![
+                    DVec2::new(3.0, 0.0),
+                    DVec2::new(4.0, 0.0),
+                    DVec2::new(3.5, 1.0),
+                ],
                 ..square(1, DVec2::ZERO, 1.0)
             },
         ];
@@ -473,11 +497,15 @@ mod tests {
         // Two outlines and the box as line loops, two fans of four triangles each.
         assert_eq!(text.matches("{\"type\":1,").count(), 3, "{text}");
         assert_eq!(
-            text.matches("\"indices\":[0,1,2,0,2,3,0,3,4,0,4,1]").count(),
+            text.matches("\"indices\":[0,1,2,0,2,3,0,3,4,0,4,1]")
+                .count(),
             2,
             "{text}"
         );
         assert!(text.contains("\"id\":\"box\""));
-        assert!(text.contains("{\"x\":0.5000,\"y\":0.5000,\"z\":0}"), "{text}");
+        assert!(
+            text.contains("{\"x\":0.5000,\"y\":0.5000,\"z\":0}"),
+            "{text}"
+        );
     }
 }
