@@ -335,8 +335,7 @@ impl Meshfree {
             out,
             "id,x,y,area,stress_xx,stress_yy,stress_xy,mean_stress_c,contacts"
         )?;
-        let contacts = self.contacts_per_grain();
-        for g in 0..self.assembly.grains.len() {
+        for (g, contacts) in self.contacts_per_grain().into_iter().enumerate() {
             let m = self
                 .grain_mean(&state.u, g)
                 .map_err(|e| std::io::Error::other(format!("grain {g}: {e}")))?;
@@ -344,7 +343,7 @@ impl Meshfree {
             writeln!(
                 out,
                 "{g},{:.12e},{:.12e},{:.12e},{sxx:.9e},{syy:.9e},{sxy:.9e},{:.9e},{}",
-                m.centroid[0], m.centroid[1], m.area, m.mean_stress_c, contacts[g]
+                m.centroid[0], m.centroid[1], m.area, m.mean_stress_c, contacts
             )?;
         }
         out.flush()
