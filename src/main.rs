@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
-use sdem::output::mcap::{McapSettings, TOPIC_GRAINS, Trajectory};
+use sdem::output::mcap::{McapSettings, Trajectory};
 use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
 use sdem::run::checkpoint::AnyCheckpoint;
@@ -38,7 +38,8 @@ enum Command {
         #[arg(long)]
         quiet: bool,
         /// Also write the trajectory (grains, contacts, walls, macro rows, a Foxglove scene) as
-        /// an MCAP log, one frame per row of macro.csv.
+        /// an MCAP log, one frame per row of macro.csv (a meshfree run logs each grain's
+        /// deformed contour in place of grains and contacts).
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
         /// Write the Foxglove `/scene` channel every K frames (0: never; default: every frame up
@@ -591,13 +592,29 @@ fn inspect(file: &Path) -> Result<()> {
         sizes.file_bytes,
         log.library()
     );
-    if let Some(name) = log.run_info("scenario") {
+    let meshfree = log.solver() == "meshfree";
+    if meshfree {
         println!(
-            "scenario: {name}, {} grains, dt = {}, contour nodes = {}",
-            log.run_info("grains").unwrap_or("?"),
-            log.run_info("dt").unwrap_or("?"),
-            log.run_info("contour_nodes").unwrap_or("?")
+            "solver: meshfree (a meshfree trajectory: each grain's boundary-node contour on {})",
+            log.frame_topic()
         );
+    }
+    if let Some(name) = log.run_info("scenario") {
+        if meshfree {
+            println!(
+                "scenario: {name}, {} grains, dt = {}, boundary nodes = {}",
+                log.run_info("grains").unwrap_or("?"),
+                log.run_info("dt").unwrap_or("?"),
+                log.run_info("boundary_nodes").unwrap_or("?")
+            );
+        } else {
+            println!(
+                "scenario: {name}, {} grains, dt = {}, contour nodes = {}",
+                log.run_info("grains").unwrap_or("?"),
+                log.run_info("dt").unwrap_or("?"),
+                log.run_info("contour_nodes").unwrap_or("?")
+            );
+        }
     }
     let frames = log.frame_count();
     println!("frames: {frames}");
@@ -634,7 +651,7 @@ fn inspect(file: &Path) -> Result<()> {
         .run_info("grains")
         .and_then(|g| g.parse().ok())
         .unwrap_or(0.0);
-    if frames > 0 && grains > 0.0 && log.channel(TOPIC_GRAINS).is_some() {
+    if frames > 0 && grains > 0.0 {
         println!(
             "bytes per grain per frame (whole file): {:.1}",
             sizes.file_bytes as f64 / (grains * frames as f64)

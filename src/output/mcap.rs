@@ -12,6 +12,18 @@
 //! | `/macro` | `sdem_msgs/msg/Macro` (ros2msg) | cdr | the row of `macro.csv` |
 //! | `/scene` | `foxglove.SceneUpdate` (jsonschema) | json | grains as flat ellipses (scaled cylinders) coloured by mean stress, and the box |
 //!
+//! A meshfree run (`model: Meshfree(...)`) writes `/contours` in place of `/grains` and
+//! `/contacts`, with the same `/walls`, `/macro` and `/scene` (its metadata `sdem.run` has
+//! `solver=meshfree`; see [`contours`] for the details):
+//!
+//! | topic | schema (encoding) | message encoding | content |
+//! | --- | --- | --- | --- |
+//! | `/contours` | `sdem_msgs/msg/Contours` (ros2msg) | cdr | per grain: id, mean Cauchy stress (tension positive), `mean_stress_c` (compression positive), point count; then the boundary nodes of all grains (x, y columns, counter-clockwise), f64 |
+//! | `/scene` | `foxglove.SceneUpdate` (jsonschema) | json | each contour as a triangle fan filled with the colour of its mean stress, outlined by a line loop, and the box |
+//!
+//! A frame is a message on `/grains` (SDEM) or `/contours` (meshfree); [`Frame::contours`] is
+//! `Some` for the latter, with [`Frame::grains`] and [`Frame::contacts`] empty.
+//!
 //! The bulk channels are little-endian CDR (XCDR1, `CDR_LE`) described by ROS 2 `.msg` schemas:
 //! a standard, self-describing layout that Foxglove decodes natively and any reader can parse
 //! from the schema text (see `tools/check_mcap.py`). Arrays are columns indexed by grain id (the
@@ -43,7 +55,12 @@ use std::io::{BufWriter, Read, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+pub mod contours;
 mod resume;
+pub use contours::{
+    CONTOUR_SCENE_SCHEMA, CONTOURS_MSG, ContourLogInfo, FrameContour, SCHEMA_CONTOURS,
+    TOPIC_CONTOURS,
+};
 pub use resume::{ContinueFrom, Continued, LogScan, scan_log};
 
 /// Version of the channel layout below; stored in the `sdem.run` metadata.
@@ -458,17 +475,29 @@ pub struct Frame {
     pub step: u64,
     pub time: f64,
     pub log_time: u64,
+    /// The SDEM grains (empty in a meshfree log).
     pub grains: Vec<FrameGrain>,
+    /// The meshfree grains as contours (`/contours`); `None` in an SDEM log.
+    pub contours: Option<Vec<FrameContour>>,
     pub walls: Vec<Wall>,
+    /// Grain–grain contacts (none in a meshfree log).
     pub contacts: Vec<FrameContact>,
     /// The `macro.csv` row of this frame (absent if the log has no `/macro` message for it).
     pub measures: Option<Measures>,
 }
 
 impl Frame {
+    /// Number of grains: ellipses, or contours in a meshfree frame.
+    pub fn grain_count(&self) -> usize {
+        match &self.contours {
+            Some(c) => c.len(),
+            None => self.grains.len(),
+        }
+    }
+
     /// The frame's grains with their contact pairs checked against the grain count.
     pub fn check(&self) -> Result<(), String> {
-        let n = self.grains.len() as u32;
+        let n = self.grain_count() as u32;
         if let Some(c) = self.contacts.iter().find(|c| c.first >= n || c.second >= n) {
             return Err(format!(
                 "contact ({}, {}) names a grain beyond the {n} of the frame",
@@ -582,12 +611,11 @@ fn decode_contacts(data: &[u8]) -> CdrResult<Vec<FrameContact>> {
         .collect())
 }
 
-fn encode_walls(buf: &mut Vec<u8>, world: &World) {
-    let walls = &world.walls;
+fn encode_walls(buf: &mut Vec<u8>, step: u64, time: f64, walls: &[Wall]) {
     let n = walls.len();
     let mut w = CdrWriter::new(buf);
-    w.u64(world.step);
-    w.f64(world.time);
+    w.u64(step);
+    w.f64(time);
     w.f64_seq(n, walls.iter().map(|w| w.point.x));
     w.f64_seq(n, walls.iter().map(|w| w.point.y));
     w.f64_seq(n, walls.iter().map(|w| w.normal.x));
@@ -701,6 +729,15 @@ fn num(v: f64) -> f64 {
     if v.is_finite() { v } else { 0.0 }
 }
 
+/// Decimals for lengths in `/scene`: 1/1000 of the smallest radius.
+fn length_decimals(min_radius: f64) -> usize {
+    if min_radius.is_finite() && min_radius > 0.0 {
+        (-(min_radius * 1e-3).log10()).ceil().clamp(0.0, 15.0) as usize
+    } else {
+        6
+    }
+}
+
 /// The `/scene` message: one entity of cylinders (the grains: ellipses seen from +z, coloured
 /// by mean stress) and one of lines (the box).
 fn encode_scene(out: &mut String, world: &World, log_time: u64) {
@@ -712,12 +749,7 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
         .iter()
         .map(|g| g.radius)
         .fold(f64::INFINITY, f64::min);
-    // Decimals for lengths: 1/1000 of the smallest radius.
-    let decimals = if min_radius.is_finite() && min_radius > 0.0 {
-        (-(min_radius * 1e-3).log10()).ceil().clamp(0.0, 15.0) as usize
-    } else {
-        6
-    };
+    let decimals = length_decimals(min_radius);
     let height = 0.2 * mean_radius;
     let mean_c: Vec<f64> = world
         .grain_stress
@@ -780,11 +812,17 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
         out.push_str(p);
     }
     out.push_str("],\"lines\":[],\"triangles\":[],\"texts\":[],\"models\":[]}");
-    // The box: a line loop through the corners of the four walls.
-    if world.walls.len() == 4 {
+    encode_box(out, &world.walls, log_time, mean_radius, decimals);
+    out.push_str("]}");
+}
+
+/// The box entity of `/scene` (after a comma): a line loop through the corners of the four
+/// walls, `0.25 * mean_radius` thick; nothing unless there are four walls.
+fn encode_box(out: &mut String, walls: &[Wall], log_time: u64, mean_radius: f64, decimals: usize) {
+    if walls.len() == 4 {
         use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-        let (x0, x1) = (world.walls[LEFT].point.x, world.walls[RIGHT].point.x);
-        let (y0, y1) = (world.walls[BOTTOM].point.y, world.walls[TOP].point.y);
+        let (x0, x1) = (walls[LEFT].point.x, walls[RIGHT].point.x);
+        let (y0, y1) = (walls[BOTTOM].point.y, walls[TOP].point.y);
         out.push_str(",{\"timestamp\":");
         json_time(out, log_time);
         out.push_str(",\"frame_id\":\"sdem\",\"id\":\"box\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[{\"type\":1,\"pose\":{\"position\":{\"x\":0,\"y\":0,\"z\":0},\"orientation\":{\"x\":0,\"y\":0,\"z\":0,\"w\":1}},");
@@ -808,7 +846,6 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
         }
         out.push_str("],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}],\"triangles\":[],\"texts\":[],\"models\":[]}");
     }
-    out.push_str("]}");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -848,8 +885,8 @@ pub struct TrajectoryWriter {
     /// A continued log is written to a temporary file that replaces this one at the first
     /// [`TrajectoryWriter::sync`] or at [`TrajectoryWriter::finish`].
     replaces: Option<PathBuf>,
-    grains: u16,
-    contacts: u16,
+    /// The channels of the grains: SDEM ellipses or meshfree contours.
+    bodies: Bodies,
     walls: u16,
     macro_row: u16,
     scene: u16,
@@ -859,6 +896,25 @@ pub struct TrajectoryWriter {
     frames: u64,
     buf: Vec<u8>,
     text: String,
+}
+
+/// A row of [`TrajectoryWriter::channel_table`].
+type ChannelRow = (
+    u16,
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static str,
+);
+
+/// How a log describes its grains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Bodies {
+    /// SDEM: `/grains` (ellipses) and `/contacts`.
+    Ellipses { grains: u16, contacts: u16 },
+    /// Meshfree: `/contours` (boundary-node polygons).
+    Contours { contours: u16 },
 }
 
 /// `round(time * 1e9)` as u64 (saturating; 0 for negative or non-finite times).
@@ -893,79 +949,57 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         world: &World,
     ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
-        let path = settings.path.display().to_string();
-        if let Some(dir) = settings.path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|error| WriteError::Io {
-                path: path.clone(),
-                error,
-            })?;
-        }
-        let file = File::create(&settings.path).map_err(|error| WriteError::Io {
-            path: path.clone(),
-            error,
-        })?;
-        let handle = file.try_clone().map_err(|error| WriteError::Io {
-            path: path.clone(),
-            error,
-        })?;
+        let (path, mut inner, handle) = Self::open_file(settings)?;
         let mcap_err = |error| WriteError::Mcap {
             path: path.clone(),
             error,
         };
-        let mut inner = WriteOptions::new()
-            .compression(Some(Compression::Zstd))
-            // No thread per core beside rayon's workers.
-            .compression_threads(0)
-            .profile("")
-            .library(format!("sdem {}", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(mcap_err)?;
-        let no_metadata = BTreeMap::new();
-        let mut channel = |topic: &str,
-                           schema: &str,
-                           schema_encoding: &str,
-                           data: &str,
-                           encoding: &str|
-         -> Result<u16, WriteError> {
-            let id = inner
-                .add_schema(schema, schema_encoding, data.as_bytes())
-                .map_err(mcap_err)?;
-            inner
-                .add_channel(id, topic, encoding, &no_metadata)
-                .map_err(mcap_err)
-        };
-        let grains = channel(TOPIC_GRAINS, SCHEMA_GRAINS, "ros2msg", GRAINS_MSG, "cdr")?;
-        let contacts = channel(
+        let grains = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_GRAINS,
+            SCHEMA_GRAINS,
+            "ros2msg",
+            GRAINS_MSG,
+            "cdr",
+        )?;
+        let contacts = add_channel(
+            &mut inner,
+            &path,
             TOPIC_CONTACTS,
             SCHEMA_CONTACTS,
             "ros2msg",
             CONTACTS_MSG,
             "cdr",
         )?;
-        let walls = channel(TOPIC_WALLS, SCHEMA_WALLS, "ros2msg", WALLS_MSG, "cdr")?;
-        let macro_row = channel(TOPIC_MACRO, SCHEMA_MACRO, "ros2msg", MACRO_MSG, "cdr")?;
-        let scene = channel(
+        let walls = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
+        )?;
+        let macro_row = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
+        )?;
+        let scene = add_channel(
+            &mut inner,
+            &path,
             TOPIC_SCENE,
             SCHEMA_SCENE,
             "jsonschema",
             SCENE_SCHEMA,
             "json",
         )?;
-
-        let scenario_text = ron::ser::to_string_pretty(
-            scenario,
-            ron::ser::PrettyConfig::default().struct_names(true),
-        )
-        .unwrap_or_default();
-        inner
-            .attach(&mcap::Attachment {
-                log_time: 0,
-                create_time: 0,
-                name: "scenario.ron".into(),
-                media_type: "text/x-ron".into(),
-                data: std::borrow::Cow::Borrowed(scenario_text.as_bytes()),
-            })
-            .map_err(mcap_err)?;
+        let scenario_text = attach_scenario(&mut inner, &path, scenario)?;
         let scene_every = settings.scene_interval(world.grains.len());
         let p = &world.params;
         let run: BTreeMap<String, String> = [
@@ -1016,8 +1050,7 @@ impl TrajectoryWriter {
             inner,
             file: handle,
             replaces: None,
-            grains,
-            contacts,
+            bodies: Bodies::Ellipses { grains, contacts },
             walls,
             macro_row,
             scene,
@@ -1032,59 +1065,64 @@ impl TrajectoryWriter {
     }
 
     /// (id, topic, schema name, schema encoding, schema, message encoding) of the channels.
-    #[allow(clippy::type_complexity)]
-    fn channel_table(
-        &self,
-    ) -> [(
-        u16,
-        &'static str,
-        &'static str,
-        &'static str,
-        &'static str,
-        &'static str,
-    ); 5] {
-        [
-            (
-                self.grains,
-                TOPIC_GRAINS,
-                SCHEMA_GRAINS,
+    fn channel_table(&self) -> Vec<ChannelRow> {
+        let mut table = match self.bodies {
+            Bodies::Ellipses { grains, contacts } => vec![
+                (
+                    grains,
+                    TOPIC_GRAINS,
+                    SCHEMA_GRAINS,
+                    "ros2msg",
+                    GRAINS_MSG,
+                    "cdr",
+                ),
+                (
+                    contacts,
+                    TOPIC_CONTACTS,
+                    SCHEMA_CONTACTS,
+                    "ros2msg",
+                    CONTACTS_MSG,
+                    "cdr",
+                ),
+            ],
+            Bodies::Contours { contours: id } => vec![(
+                id,
+                contours::TOPIC_CONTOURS,
+                contours::SCHEMA_CONTOURS,
                 "ros2msg",
-                GRAINS_MSG,
+                contours::CONTOURS_MSG,
                 "cdr",
-            ),
-            (
-                self.contacts,
-                TOPIC_CONTACTS,
-                SCHEMA_CONTACTS,
-                "ros2msg",
-                CONTACTS_MSG,
-                "cdr",
-            ),
-            (
-                self.walls,
-                TOPIC_WALLS,
-                SCHEMA_WALLS,
-                "ros2msg",
-                WALLS_MSG,
-                "cdr",
-            ),
-            (
-                self.macro_row,
-                TOPIC_MACRO,
-                SCHEMA_MACRO,
-                "ros2msg",
-                MACRO_MSG,
-                "cdr",
-            ),
-            (
-                self.scene,
-                TOPIC_SCENE,
-                SCHEMA_SCENE,
-                "jsonschema",
-                SCENE_SCHEMA,
-                "json",
-            ),
-        ]
+            )],
+        };
+        table.push((
+            self.walls,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
+        ));
+        table.push((
+            self.macro_row,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
+        ));
+        let scene_schema = match self.bodies {
+            Bodies::Ellipses { .. } => SCENE_SCHEMA,
+            Bodies::Contours { .. } => contours::CONTOUR_SCENE_SCHEMA,
+        };
+        table.push((
+            self.scene,
+            TOPIC_SCENE,
+            SCHEMA_SCENE,
+            "jsonschema",
+            scene_schema,
+            "json",
+        ));
+        table
     }
 
     fn mcap_error(&self, error: mcap::McapError) -> WriteError {
@@ -1107,6 +1145,19 @@ impl TrajectoryWriter {
             .map_err(|e| self.mcap_error(e))
     }
 
+    /// The log time of a frame at simulated time `time`: `round(time * 1e9)` ns, bumped to
+    /// stay strictly increasing.
+    fn next_log_time(&mut self, time: f64) -> u64 {
+        let mut log_time = time_to_ns(time);
+        if let Some(last) = self.last_log_time
+            && log_time <= last
+        {
+            log_time = last + 1;
+        }
+        self.last_log_time = Some(log_time);
+        log_time
+    }
+
     /// Frames written so far.
     pub fn frames(&self) -> u64 {
         self.frames
@@ -1114,20 +1165,23 @@ impl TrajectoryWriter {
 
     /// Logs the world's current state with its `macro.csv` row.
     pub fn write_frame(&mut self, world: &World, row: &Measures) -> Result<(), WriteError> {
-        let mut log_time = time_to_ns(world.time);
-        if let Some(last) = self.last_log_time
-            && log_time <= last
-        {
-            log_time = last + 1;
-        }
-        self.last_log_time = Some(log_time);
+        let Bodies::Ellipses {
+            grains,
+            contacts: contacts_channel,
+        } = self.bodies
+        else {
+            return Err(self.io_error(std::io::Error::other(
+                "an SDEM frame cannot go into a log of meshfree contours",
+            )));
+        };
+        let log_time = self.next_log_time(world.time);
         let mut buf = std::mem::take(&mut self.buf);
         encode_grains(&mut buf, world);
-        self.put(self.grains, log_time, &buf)?;
+        self.put(grains, log_time, &buf)?;
         let contacts = active_contacts(world);
         encode_contacts(&mut buf, world, &contacts);
-        self.put(self.contacts, log_time, &buf)?;
-        encode_walls(&mut buf, world);
+        self.put(contacts_channel, log_time, &buf)?;
+        encode_walls(&mut buf, world.step, world.time, &world.walls);
         self.put(self.walls, log_time, &buf)?;
         encode_macro(&mut buf, row);
         self.put(self.macro_row, log_time, &buf)?;
@@ -1194,6 +1248,90 @@ impl TrajectoryWriter {
     }
 }
 
+type McapWriter = mcap::Writer<BufWriter<File>>;
+
+impl TrajectoryWriter {
+    /// Creates the file of a new log (and its folder) and writes the MCAP header: (path for
+    /// messages, writer, a handle on the same file to fsync it).
+    fn open_file(settings: &McapSettings) -> Result<(String, McapWriter, File), WriteError> {
+        let path = settings.path.display().to_string();
+        if let Some(dir) = settings.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|error| WriteError::Io {
+                path: path.clone(),
+                error,
+            })?;
+        }
+        let file = File::create(&settings.path).map_err(|error| WriteError::Io {
+            path: path.clone(),
+            error,
+        })?;
+        let handle = file.try_clone().map_err(|error| WriteError::Io {
+            path: path.clone(),
+            error,
+        })?;
+        let inner = WriteOptions::new()
+            .compression(Some(Compression::Zstd))
+            // No thread per core beside rayon's workers.
+            .compression_threads(0)
+            .profile("")
+            .library(format!("sdem {}", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .map_err(|error| WriteError::Mcap {
+                path: path.clone(),
+                error,
+            })?;
+        Ok((path, inner, handle))
+    }
+}
+
+/// Adds a schema and its channel to a new log; returns the channel id.
+fn add_channel(
+    inner: &mut McapWriter,
+    path: &str,
+    topic: &str,
+    schema: &str,
+    schema_encoding: &str,
+    data: &str,
+    encoding: &str,
+) -> Result<u16, WriteError> {
+    let mcap_err = |error| WriteError::Mcap {
+        path: path.to_string(),
+        error,
+    };
+    let id = inner
+        .add_schema(schema, schema_encoding, data.as_bytes())
+        .map_err(mcap_err)?;
+    inner
+        .add_channel(id, topic, encoding, &BTreeMap::new())
+        .map_err(mcap_err)
+}
+
+/// Attaches the scenario (RON, every default filled in) as `scenario.ron`; returns its text.
+fn attach_scenario(
+    inner: &mut McapWriter,
+    path: &str,
+    scenario: &Scenario,
+) -> Result<String, WriteError> {
+    let scenario_text = ron::ser::to_string_pretty(
+        scenario,
+        ron::ser::PrettyConfig::default().struct_names(true),
+    )
+    .unwrap_or_default();
+    inner
+        .attach(&mcap::Attachment {
+            log_time: 0,
+            create_time: 0,
+            name: "scenario.ron".into(),
+            media_type: "text/x-ron".into(),
+            data: std::borrow::Cow::Borrowed(scenario_text.as_bytes()),
+        })
+        .map_err(|error| WriteError::Mcap {
+            path: path.to_string(),
+            error,
+        })?;
+    Ok(scenario_text)
+}
+
 /// Renames `from` to `to` and fsyncs the folder (where the platform allows opening one).
 fn rename_durably(from: &str, to: &Path) -> Result<(), WriteError> {
     std::fs::rename(from, to).map_err(|error| WriteError::Io {
@@ -1253,6 +1391,8 @@ pub struct Trajectory {
     messages: HashMap<u16, Vec<MessageRef>>,
     attachments: Vec<AttachmentInfo>,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
+    /// The channel with one message per frame: `/grains` (SDEM) or `/contours` (meshfree).
+    frame_topic: &'static str,
 }
 
 /// A step count and its simulated time.
@@ -1339,6 +1479,7 @@ impl Trajectory {
             messages: HashMap::new(),
             attachments: Vec::new(),
             metadata: BTreeMap::new(),
+            frame_topic: TOPIC_GRAINS,
         };
         traj.check_chunk_indexes()?;
         traj.index_messages()?;
@@ -1373,24 +1514,33 @@ impl Trajectory {
             .collect();
         channels.sort_by_key(|c| c.id);
         traj.channels = channels;
-        for topic in [TOPIC_GRAINS, TOPIC_WALLS] {
+        // SDEM logs have `/grains`, meshfree logs `/contours` in its place.
+        if traj.channel(TOPIC_GRAINS).is_none() && traj.channel(contours::TOPIC_CONTOURS).is_some()
+        {
+            traj.frame_topic = contours::TOPIC_CONTOURS;
+        }
+        let not_ours = |reason: String| ReadError::NotATrajectory {
+            path: traj.name(),
+            reason,
+        };
+        for topic in [traj.frame_topic, TOPIC_WALLS] {
             if traj.channel(topic).is_none() {
-                return Err(ReadError::NotATrajectory {
-                    path: traj.name(),
-                    reason: format!("an MCAP file but not an sdem trajectory: no {topic} channel"),
-                });
+                return Err(not_ours(format!(
+                    "an MCAP file but not an sdem trajectory: no {topic} channel"
+                )));
             }
         }
-        if let Some(c) = traj.channel(TOPIC_GRAINS)
-            && c.schema_name != SCHEMA_GRAINS
+        let expected = match traj.frame_topic {
+            TOPIC_GRAINS => SCHEMA_GRAINS,
+            _ => contours::SCHEMA_CONTOURS,
+        };
+        if let Some(c) = traj.channel(traj.frame_topic)
+            && c.schema_name != expected
         {
-            return Err(ReadError::NotATrajectory {
-                path: traj.name(),
-                reason: format!(
-                    "{TOPIC_GRAINS} has schema {}, expected {SCHEMA_GRAINS}",
-                    c.schema_name
-                ),
-            });
+            return Err(not_ours(format!(
+                "{} has schema {}, expected {expected}",
+                traj.frame_topic, c.schema_name
+            )));
         }
         Ok(traj)
     }
@@ -1656,14 +1806,32 @@ impl Trajectory {
             .map_or(&[], |v| v.as_slice())
     }
 
-    /// Number of frames (messages on `/grains`).
+    /// The solver that wrote the log: `meshfree` (grains as contours on `/contours`) or
+    /// `sdem` (ellipses on `/grains`).
+    pub fn solver(&self) -> &str {
+        if self.frame_topic == contours::TOPIC_CONTOURS {
+            "meshfree"
+        } else {
+            "sdem"
+        }
+    }
+
+    /// The channel with one message per frame: `/grains`, or `/contours` in a meshfree log.
+    pub fn frame_topic(&self) -> &'static str {
+        self.frame_topic
+    }
+
+    /// Number of frames (messages on `/grains`, or `/contours` in a meshfree log).
     pub fn frame_count(&self) -> usize {
-        self.refs(TOPIC_GRAINS).len()
+        self.refs(self.frame_topic).len()
     }
 
     /// Log times (ns) of the frames.
     pub fn frame_log_times(&self) -> Vec<u64> {
-        self.refs(TOPIC_GRAINS).iter().map(|m| m.log_time).collect()
+        self.refs(self.frame_topic)
+            .iter()
+            .map(|m| m.log_time)
+            .collect()
     }
 
     /// Resolves a frame number: `k >= 0` from the start, `k < 0` from the end (-1: the last).
@@ -1707,15 +1875,24 @@ impl Trajectory {
         Ok(self.payloads_at(topic, log_time)?.into_iter().next())
     }
 
-    /// Frame `k` (0-based; negative counts from the end): grains, walls, contacts, macro row.
+    /// Frame `k` (0-based; negative counts from the end): grains (or contours), walls,
+    /// contacts, macro row.
     pub fn frame(&self, k: i64) -> Result<Frame, ReadError> {
         let index = self.resolve_frame(k)?;
-        let log_time = self.refs(TOPIC_GRAINS)[index].log_time;
+        let topic = self.frame_topic;
+        let log_time = self.refs(topic)[index].log_time;
         let bad = |topic: &str, e: String| self.corrupt(format!("{topic} at frame {index}: {e}"));
-        let grains = self
-            .single_payload(TOPIC_GRAINS, log_time)?
-            .ok_or_else(|| bad(TOPIC_GRAINS, "message missing from its chunk".into()))?;
-        let (step, time, grains) = decode_grains(&grains).map_err(|e| bad(TOPIC_GRAINS, e))?;
+        let bodies = self
+            .single_payload(topic, log_time)?
+            .ok_or_else(|| bad(topic, "message missing from its chunk".into()))?;
+        let (step, time, grains, contours) = if topic == TOPIC_GRAINS {
+            let (step, time, grains) = decode_grains(&bodies).map_err(|e| bad(topic, e))?;
+            (step, time, grains, None)
+        } else {
+            let (step, time, contours) =
+                contours::decode_contours(&bodies).map_err(|e| bad(topic, e))?;
+            (step, time, Vec::new(), Some(contours))
+        };
         let walls = match self.single_payload(TOPIC_WALLS, log_time)? {
             Some(d) => decode_walls(&d).map_err(|e| bad(TOPIC_WALLS, e))?,
             None => Vec::new(),
@@ -1733,6 +1910,7 @@ impl Trajectory {
             time,
             log_time,
             grains,
+            contours,
             walls,
             contacts,
             measures,
@@ -1799,13 +1977,15 @@ impl Trajectory {
         Ok(Some((first, last)))
     }
 
-    /// (step, time) of frame k, decoding only the start of its `/grains` message.
+    /// (step, time) of frame k, decoding only the start of its `/grains` (or `/contours`)
+    /// message.
     pub fn frame_header(&self, k: i64) -> Result<(u64, f64), ReadError> {
         let index = self.resolve_frame(k)?;
-        let log_time = self.refs(TOPIC_GRAINS)[index].log_time;
+        let topic = self.frame_topic;
+        let log_time = self.refs(topic)[index].log_time;
         let data = self
-            .single_payload(TOPIC_GRAINS, log_time)?
-            .ok_or_else(|| self.corrupt(format!("{TOPIC_GRAINS} at frame {index} missing")))?;
+            .single_payload(topic, log_time)?
+            .ok_or_else(|| self.corrupt(format!("{topic} at frame {index} missing")))?;
         let mut r = CdrReader::new(&data).map_err(|e| self.corrupt(e))?;
         let step = r.u64().map_err(|e| self.corrupt(e))?;
         let time = r.f64().map_err(|e| self.corrupt(e))?;

@@ -8,9 +8,13 @@
 //! `(x - x_c) . n <= 0` for the first grain of a pair, `>= 0` for the second) and by each wall.
 //! The chords come from the logged contacts; the contour resolution of the picture follows its
 //! pixel size (the chords are exact whatever the resolution).
+//!
+//! A meshfree frame (`/contours`, see [`crate::output::mcap`]) holds each grain's deformed
+//! contour itself: the polygon of its boundary nodes is drawn as it is, clipped by the walls
+//! only, with the same colours.
 
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-use crate::output::mcap::{Frame, FrameGrain, stress_colour_max};
+use crate::output::mcap::{Frame, FrameContour, FrameGrain, stress_colour_max};
 use glam::DVec2;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -170,6 +174,10 @@ fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) 
     }
     let mut lo = DVec2::splat(f64::INFINITY);
     let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    for p in frame.contours.iter().flatten().flat_map(|c| &c.points) {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
     for g in &frame.grains {
         let r = g.radius * (1.0 + g.eps1.max(g.eps2).max(0.0));
         lo = lo.min(g.center - DVec2::splat(r));
@@ -188,7 +196,7 @@ pub fn render_frame(
     options: &RenderOptions,
 ) -> Result<RenderInfo, String> {
     register_fonts();
-    if frame.grains.is_empty() {
+    if frame.grain_count() == 0 {
         return Err("the frame has no grains".into());
     }
     frame.check()?;
@@ -203,7 +211,10 @@ pub fn render_frame(
     let bar_w = 170u32;
     let width = margin + box_w + margin + bar_w;
     let height = caption_h + box_h + margin;
-    let means: Vec<f64> = frame.grains.iter().map(|g| g.mean_stress_c()).collect();
+    let means: Vec<f64> = match &frame.contours {
+        Some(contours) => contours.iter().map(|c| c.mean_stress_c).collect(),
+        None => frame.grains.iter().map(|g| g.mean_stress_c()).collect(),
+    };
     let stress_max = options
         .stress_max
         .filter(|v| v.is_finite() && *v > 0.0)
@@ -232,7 +243,7 @@ pub fn render_frame(
     Ok(RenderInfo {
         width,
         height,
-        grains: frame.grains.len(),
+        grains: frame.grain_count(),
         stress_max,
     })
 }
@@ -269,22 +280,115 @@ fn draw<DB: DrawingBackend>(
     options: &RenderOptions,
 ) -> Result<(), String> {
     root.fill(&WHITE).map_err(err)?;
-    let cuts = frame_cuts(frame);
-    // Contour nodes: about one per 2 pixels of perimeter, at most 360.
-    let outline = RGBColor(25, 25, 25);
-    // The view's edges cut every grain too (no drawing outside the picture's box).
-    let view = [
+    if let Some(contours) = &frame.contours {
+        draw_contours(root, frame, contours, means, layout)?;
+    } else {
+        draw_ellipses(root, frame, means, layout)?;
+    }
+    draw_frame_decor(root, frame, layout, options)
+}
+
+/// The grain's colour for mean stress `mean` on the layout's scale.
+fn stress_colour(mean: f64, layout: &Layout) -> RGBColor {
+    let t = if layout.stress_max > 0.0 {
+        mean / layout.stress_max
+    } else {
+        0.0
+    };
+    let [r, g, b] = viridis(t);
+    RGBColor(r, g, b)
+}
+
+/// Fills `polygon` (model coordinates) with `fill` and outlines it when it is large enough.
+fn draw_polygon<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    polygon: &[DVec2],
+    fill: RGBColor,
+    outlined: bool,
+    layout: &Layout,
+) -> Result<(), String> {
+    let pixels: Vec<(i32, i32)> = polygon.iter().map(|&x| layout.pixel(x)).collect();
+    root.draw(&Polygon::new(pixels.clone(), fill.filled()))
+        .map_err(err)?;
+    if outlined {
+        let mut closed = pixels;
+        closed.push(closed[0]);
+        root.draw(&PathElement::new(
+            closed,
+            RGBColor(25, 25, 25).stroke_width(1),
+        ))
+        .map_err(err)?;
+    }
+    Ok(())
+}
+
+/// The half-planes of the view's edges (no drawing outside the picture's box).
+fn view_cuts(layout: &Layout) -> [(DVec2, DVec2); 4] {
+    [
         (layout.lo, -DVec2::X),
         (layout.lo, -DVec2::Y),
         (layout.hi, DVec2::X),
         (layout.hi, DVec2::Y),
-    ];
+    ]
+}
+
+/// Meshfree grains: each contour as logged, clipped by the walls and the view.
+fn draw_contours<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    frame: &Frame,
+    contours: &[FrameContour],
+    means: &[f64],
+    layout: &Layout,
+) -> Result<(), String> {
+    let cuts: Vec<(DVec2, DVec2)> = frame
+        .walls
+        .iter()
+        .map(|w| (w.point, -w.normal))
+        .chain(view_cuts(layout))
+        .collect();
+    for (k, c) in contours.iter().enumerate() {
+        if c.points.len() < 3 || !c.points.iter().all(|p| p.is_finite()) {
+            continue;
+        }
+        let mut polygon = c.points.clone();
+        for &(point, normal) in &cuts {
+            if polygon.len() < 3 {
+                break;
+            }
+            polygon = clip_half_plane(&polygon, point, normal);
+        }
+        if polygon.len() < 3 {
+            continue;
+        }
+        let r_px = c.equivalent_radius() * layout.scale;
+        draw_polygon(
+            root,
+            &polygon,
+            stress_colour(means[k], layout),
+            r_px >= 4.0,
+            layout,
+        )?;
+    }
+    Ok(())
+}
+
+/// SDEM grains: ellipses cut along their contact chords and by the walls and the view.
+fn draw_ellipses<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    frame: &Frame,
+    means: &[f64],
+    layout: &Layout,
+) -> Result<(), String> {
+    let cuts = frame_cuts(frame);
+    // The view's edges cut every grain too (no drawing outside the picture's box).
+    let view = view_cuts(layout);
     for (k, g) in frame.grains.iter().enumerate() {
         let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
         let r_px = reach * layout.scale;
         if !r_px.is_finite() || (g.center - g.center.clamp(layout.lo, layout.hi)).length() > reach {
             continue;
         }
+        // Contour nodes: about one per 2 pixels of perimeter, at most 360.
         let nodes = (std::f64::consts::PI * r_px).clamp(12.0, 360.0) as usize;
         let mut polygon = grain_outline(g, nodes, &cuts[k]);
         for &(point, normal) in &view {
@@ -296,22 +400,24 @@ fn draw<DB: DrawingBackend>(
         if polygon.len() < 3 {
             continue;
         }
-        let pixels: Vec<(i32, i32)> = polygon.iter().map(|&x| layout.pixel(x)).collect();
-        let t = if layout.stress_max > 0.0 {
-            means[k] / layout.stress_max
-        } else {
-            0.0
-        };
-        let [r, gg, b] = viridis(t);
-        root.draw(&Polygon::new(pixels.clone(), RGBColor(r, gg, b).filled()))
-            .map_err(err)?;
-        if r_px >= 4.0 {
-            let mut closed = pixels;
-            closed.push(closed[0]);
-            root.draw(&PathElement::new(closed, outline.stroke_width(1)))
-                .map_err(err)?;
-        }
+        draw_polygon(
+            root,
+            &polygon,
+            stress_colour(means[k], layout),
+            r_px >= 4.0,
+            layout,
+        )?;
     }
+    Ok(())
+}
+
+/// The box, the caption and the colour bar.
+fn draw_frame_decor<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    frame: &Frame,
+    layout: &Layout,
+    options: &RenderOptions,
+) -> Result<(), String> {
     // The box.
     let (x0, y0) = layout.origin;
     root.draw(&Rectangle::new(
@@ -333,9 +439,9 @@ fn draw<DB: DrawingBackend>(
         ));
     }
     let title = if options.title.is_empty() {
-        format!("{} grains", frame.grains.len())
+        format!("{} grains", frame.grain_count())
     } else {
-        format!("{} — {} grains", options.title, frame.grains.len())
+        format!("{} — {} grains", options.title, frame.grain_count())
     };
     root.draw_text(&title, &font(22), (x0, 8)).map_err(err)?;
     root.draw_text(&line2, &font(17), (x0, 36)).map_err(err)?;

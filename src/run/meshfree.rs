@@ -27,6 +27,9 @@ use crate::meshfree::{
     TimeScheme, packing,
 };
 use crate::output::Measures;
+use crate::output::mcap::{
+    ContinueFrom, ContourLogInfo, FrameContour, McapSettings, TrajectoryWriter, WriteError,
+};
 use crate::sample;
 use crate::scenario::{GrainShapes, MeshfreeSettings, Scenario, TimeStep};
 
@@ -160,6 +163,17 @@ pub struct Meshfree {
     pub(crate) density: f64,
 }
 
+/// A grain's current area, area centroid and mean Cauchy stress: the stress integral over the
+/// current area, `(xx, yy, xy)`, tension positive; `mean_stress_c = -(xx + yy) / 2`,
+/// compression positive.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GrainMean {
+    pub area: f64,
+    pub centroid: [f64; 2],
+    pub stress: [f64; 3],
+    pub mean_stress_c: f64,
+}
+
 /// The settings of a meshfree scenario (None for an SDEM model).
 pub fn settings_of(scenario: &Scenario) -> Option<MeshfreeSettings> {
     match scenario.model {
@@ -276,28 +290,61 @@ impl Meshfree {
         c
     }
 
+    /// Current area, area centroid and mean stress of grain `g` in the displacements `u` (as
+    /// `grains.csv` and the MCAP frames report them).
+    pub fn grain_mean(&self, u: &[f64], g: usize) -> Result<GrainMean, MeshfreeError> {
+        let model = &self.assembly.grains[g];
+        let u = self.assembly.grain_slice(u, g);
+        let (area, centroid) = model.contour_area_centroid(u);
+        let s = model.stress_integral(u)?;
+        let stress = [
+            s[0][0] / area,
+            s[1][1] / area,
+            0.5 * (s[0][1] + s[1][0]) / area,
+        ];
+        Ok(GrainMean {
+            area,
+            centroid,
+            stress,
+            mean_stress_c: -0.5 * (stress[0] + stress[1]),
+        })
+    }
+
+    /// The grains of the current state as MCAP contours: boundary nodes (counter-clockwise)
+    /// and mean stress.
+    pub fn frame_contours(&self) -> Result<Vec<FrameContour>, MeshfreeError> {
+        (0..self.assembly.grains.len())
+            .map(|g| {
+                let model = &self.assembly.grains[g];
+                let u = self.assembly.grain_slice(&self.state.u, g);
+                let m = self.grain_mean(&self.state.u, g)?;
+                Ok(FrameContour {
+                    grain: g as u32,
+                    stress: m.stress,
+                    mean_stress_c: m.mean_stress_c,
+                    points: (0..model.nodes.boundary_count)
+                        .map(|s| glam::DVec2::from(model.position(u, s)))
+                        .collect(),
+                })
+            })
+            .collect()
+    }
+
     fn write_state(&self, path: &Path, state: &AssemblyState) -> std::io::Result<()> {
         let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
         writeln!(
             out,
             "id,x,y,area,stress_xx,stress_yy,stress_xy,mean_stress_c,contacts"
         )?;
-        let contacts = self.contacts_per_grain();
-        for (g, model) in self.assembly.grains.iter().enumerate() {
-            let u = self.assembly.grain_slice(&state.u, g);
-            let (area, c) = model.contour_area_centroid(u);
-            let s = model
-                .stress_integral(u)
+        for (g, contacts) in self.contacts_per_grain().into_iter().enumerate() {
+            let m = self
+                .grain_mean(&state.u, g)
                 .map_err(|e| std::io::Error::other(format!("grain {g}: {e}")))?;
-            let (sxx, syy, sxy) = (s[0][0] / area, s[1][1] / area, 0.5 * (s[0][1] + s[1][0]) / area);
+            let [sxx, syy, sxy] = m.stress;
             writeln!(
                 out,
                 "{g},{:.12e},{:.12e},{:.12e},{sxx:.9e},{syy:.9e},{sxy:.9e},{:.9e},{}",
-                c[0],
-                c[1],
-                area,
-                -0.5 * (sxx + syy),
-                contacts[g]
+                m.centroid[0], m.centroid[1], m.area, m.mean_stress_c, contacts
             )?;
         }
         out.flush()
@@ -431,6 +478,46 @@ impl Simulation for Meshfree {
 
     fn write_grains(&self, path: &Path) -> std::io::Result<()> {
         self.write_state(path, &self.state)
+    }
+
+    fn open_log(
+        &self,
+        settings: &McapSettings,
+        scenario: &Scenario,
+        continue_from: Option<ContinueFrom>,
+    ) -> Result<TrajectoryWriter, RunError> {
+        if continue_from.is_some() {
+            return Err(RunError::Setup(format!(
+                "{}: continuing the MCAP log of a meshfree run is not implemented yet",
+                settings.path.display()
+            )));
+        }
+        let info = ContourLogInfo {
+            grains: self.assembly.grains.len(),
+            boundary_nodes: self
+                .assembly
+                .grains
+                .iter()
+                .map(|m| m.nodes.boundary_count)
+                .sum(),
+            dt: self.dt,
+        };
+        TrajectoryWriter::create_contours(settings, scenario, &info)
+            .map_err(|e| io_error(&settings.path)(e.into()))
+    }
+
+    fn write_frame(&self, log: &mut TrajectoryWriter, row: &Measures) -> Result<(), WriteError> {
+        let contours = self.frame_contours().map_err(|e| WriteError::Io {
+            path: String::new(),
+            error: std::io::Error::other(format!("meshfree contours at step {}: {e}", self.step)),
+        })?;
+        log.write_contour_frame(
+            self.step,
+            self.state.time,
+            &contours,
+            &self.assembly.walls,
+            row,
+        )
     }
 
     fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {

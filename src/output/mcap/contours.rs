@@ -1,0 +1,511 @@
+//! Meshfree grains in a trajectory log: each grain as the polygon of its boundary field nodes.
+//!
+//! A meshfree run (`model: Meshfree(...)`) writes `/contours` in place of `/grains` and
+//! `/contacts` (its grains are not ellipses and its contacts are node-to-segment pairs, not
+//! chords); `/walls`, `/macro` and `/scene` are as in an SDEM log, and the `sdem.run` metadata
+//! says `solver=meshfree`. One `/contours` message per frame holds, for every grain in the
+//! order of `grains.csv`, its mean Cauchy stress and the current positions of its boundary
+//! nodes, counter-clockwise: the deformed contour, exactly the polygon whose area centroid and
+//! area `grains.csv` reports. `/scene` draws each contour as a triangle fan from its area
+//! centroid filled with the colour of its mean stress, outlined by a line loop.
+
+use super::{
+    Bodies, CdrReader, CdrResult, CdrWriter, FORMAT_VERSION, MACRO_MSG, McapSettings, SCHEMA_MACRO,
+    SCHEMA_SCENE, SCHEMA_WALLS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, TrajectoryWriter, WALLS_MSG,
+    WriteError, add_channel, attach_scenario, encode_box, encode_macro, encode_walls, json_time,
+    length_decimals, num, stress_colour_max,
+};
+use crate::boundary::walls::Wall;
+use crate::output::measures::Measures;
+use crate::scenario::Scenario;
+use glam::DVec2;
+use mcap::records;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+pub const TOPIC_CONTOURS: &str = "/contours";
+pub const SCHEMA_CONTOURS: &str = "sdem_msgs/msg/Contours";
+
+/// ROS 2 message definition of `/contours`.
+pub const CONTOURS_MSG: &str = "\
+# sdem_msgs/msg/Contours: every grain of a meshfree run at one output interval, as the polygon
+# of its boundary field nodes. Per-grain arrays are indexed by grain id, the line order of
+# grains.csv; x and y hold the points of all contours, one contour after the other.
+uint64 step
+float64 time
+uint32[] grain          # grain id of each contour
+float64[] stress_xx     # mean Cauchy stress over the current grain (its integral over the
+float64[] stress_yy     # current area), global frame, TENSION positive
+float64[] stress_xy
+float64[] mean_stress_c # -(stress_xx + stress_yy) / 2, COMPRESSION positive
+uint32[] point_count    # boundary nodes of each contour
+float64[] x             # current positions of the boundary nodes, counter-clockwise
+float64[] y
+";
+
+/// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that `/scene` of a meshfree
+/// log uses (entities made of triangle lists and lines).
+pub const CONTOUR_SCENE_SCHEMA: &str = r##"{
+  "title": "foxglove.SceneUpdate",
+  "description": "An update to the entities displayed in a 3D scene (subset written by sdem for meshfree grains: triangles and lines)",
+  "type": "object",
+  "$defs": {
+    "time": {"type": "object", "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}},
+    "vector3": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}}},
+    "quaternion": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}},
+    "pose": {"type": "object", "properties": {"position": {"$ref": "#/$defs/vector3"}, "orientation": {"$ref": "#/$defs/quaternion"}}},
+    "color": {"type": "object", "properties": {"r": {"type": "number"}, "g": {"type": "number"}, "b": {"type": "number"}, "a": {"type": "number"}}},
+    "cylinder": {"title": "foxglove.CylinderPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "size": {"$ref": "#/$defs/vector3"}, "bottom_scale": {"type": "number"}, "top_scale": {"type": "number"}, "color": {"$ref": "#/$defs/color"}}},
+    "triangles": {"title": "foxglove.TriangleListPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}},
+    "line": {"title": "foxglove.LinePrimitive", "type": "object", "properties": {"type": {"type": "integer"}, "pose": {"$ref": "#/$defs/pose"}, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}}
+  },
+  "properties": {
+    "deletions": {"type": "array", "items": {"type": "object"}},
+    "entities": {"type": "array", "items": {"title": "foxglove.SceneEntity", "type": "object", "properties": {
+      "timestamp": {"$ref": "#/$defs/time"},
+      "frame_id": {"type": "string"},
+      "id": {"type": "string"},
+      "lifetime": {"$ref": "#/$defs/time"},
+      "frame_locked": {"type": "boolean"},
+      "metadata": {"type": "array", "items": {"type": "object", "properties": {"key": {"type": "string"}, "value": {"type": "string"}}}},
+      "arrows": {"type": "array"}, "cubes": {"type": "array"}, "spheres": {"type": "array"},
+      "cylinders": {"type": "array", "items": {"$ref": "#/$defs/cylinder"}},
+      "lines": {"type": "array", "items": {"$ref": "#/$defs/line"}},
+      "triangles": {"type": "array", "items": {"$ref": "#/$defs/triangles"}}, "texts": {"type": "array"}, "models": {"type": "array"}
+    }}}
+  }
+}
+"##;
+
+/// One meshfree grain as logged: its deformed contour and mean stress.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameContour {
+    /// Grain id (the line of `grains.csv`).
+    pub grain: u32,
+    /// Mean Cauchy stress (xx, yy, xy), global frame, tension positive.
+    pub stress: [f64; 3],
+    /// Mean stress, compression positive: `-(sxx + syy) / 2`.
+    pub mean_stress_c: f64,
+    /// The boundary nodes, counter-clockwise.
+    pub points: Vec<DVec2>,
+}
+
+impl FrameContour {
+    /// Area and area centroid of the polygon (the shoelace formula, as the solver computes
+    /// them for `grains.csv`).
+    pub fn area_centroid(&self) -> (f64, DVec2) {
+        let p = &self.points;
+        let n = p.len();
+        let (mut a2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for k in 0..n {
+            let (a, b) = (p[k], p[(k + 1) % n]);
+            let cross = a.x * b.y - b.x * a.y;
+            a2 += cross;
+            cx += (a.x + b.x) * cross;
+            cy += (a.y + b.y) * cross;
+        }
+        (0.5 * a2, DVec2::new(cx / (3.0 * a2), cy / (3.0 * a2)))
+    }
+
+    /// Radius of the disc of the same area.
+    pub fn equivalent_radius(&self) -> f64 {
+        (self.area_centroid().0.abs() / std::f64::consts::PI).sqrt()
+    }
+}
+
+/// What the `sdem.run` metadata of a meshfree log says beyond the scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContourLogInfo {
+    pub grains: usize,
+    /// Boundary nodes of all grains together.
+    pub boundary_nodes: usize,
+    /// The time step.
+    pub dt: f64,
+}
+
+pub(super) fn encode_contours(buf: &mut Vec<u8>, step: u64, time: f64, contours: &[FrameContour]) {
+    let n = contours.len();
+    let points: usize = contours.iter().map(|c| c.points.len()).sum();
+    let mut w = CdrWriter::new(buf);
+    w.u64(step);
+    w.f64(time);
+    w.u32_seq(n, contours.iter().map(|c| c.grain));
+    for k in 0..3 {
+        w.f64_seq(n, contours.iter().map(|c| c.stress[k]));
+    }
+    w.f64_seq(n, contours.iter().map(|c| c.mean_stress_c));
+    w.u32_seq(n, contours.iter().map(|c| c.points.len() as u32));
+    w.f64_seq(
+        points,
+        contours.iter().flat_map(|c| c.points.iter().map(|p| p.x)),
+    );
+    w.f64_seq(
+        points,
+        contours.iter().flat_map(|c| c.points.iter().map(|p| p.y)),
+    );
+}
+
+pub(super) fn decode_contours(data: &[u8]) -> CdrResult<(u64, f64, Vec<FrameContour>)> {
+    let mut r = CdrReader::new(data)?;
+    let step = r.u64()?;
+    let time = r.f64()?;
+    let grain = r.u32_seq()?;
+    let columns: Vec<Vec<f64>> = (0..4).map(|_| r.f64_seq()).collect::<CdrResult<_>>()?;
+    let counts = r.u32_seq()?;
+    let x = r.f64_seq()?;
+    let y = r.f64_seq()?;
+    let n = grain.len();
+    if columns.iter().any(|c| c.len() != n) || counts.len() != n {
+        return Err("contour columns of different lengths".into());
+    }
+    let total: u64 = counts.iter().map(|&c| c as u64).sum();
+    if x.len() != y.len() || total != x.len() as u64 {
+        return Err(format!(
+            "the point counts add up to {total} but the contours hold {} x and {} y",
+            x.len(),
+            y.len()
+        ));
+    }
+    let mut start = 0;
+    let contours = (0..n)
+        .map(|k| {
+            let end = start + counts[k] as usize;
+            let points = (start..end).map(|i| DVec2::new(x[i], y[i])).collect();
+            start = end;
+            FrameContour {
+                grain: grain[k],
+                stress: [columns[0][k], columns[1][k], columns[2][k]],
+                mean_stress_c: columns[3][k],
+                points,
+            }
+        })
+        .collect();
+    Ok((step, time, contours))
+}
+
+/// The `/scene` message of a meshfree frame: one entity with, per grain, a triangle fan from
+/// its area centroid (filled with the colour of its mean stress, viridis over
+/// [`stress_colour_max`]) and its outline as a line loop; then the box.
+pub(super) fn encode_contour_scene(
+    out: &mut String,
+    step: u64,
+    contours: &[FrameContour],
+    walls: &[Wall],
+    log_time: u64,
+) {
+    out.clear();
+    let radii: Vec<f64> = contours.iter().map(|c| c.equivalent_radius()).collect();
+    let mean_radius = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
+    let decimals = length_decimals(radii.iter().copied().fold(f64::INFINITY, f64::min));
+    let means: Vec<f64> = contours.iter().map(|c| c.mean_stress_c).collect();
+    let top = stress_colour_max(&means);
+    let identity = "\"pose\":{\"position\":{\"x\":0,\"y\":0,\"z\":0},\"orientation\":{\"x\":0,\"y\":0,\"z\":0,\"w\":1}}";
+    let point = |s: &mut String, p: DVec2| {
+        let _ = write!(
+            s,
+            "{{\"x\":{:.d$},\"y\":{:.d$},\"z\":0}}",
+            num(p.x),
+            num(p.y),
+            d = decimals
+        );
+    };
+
+    out.push_str("{\"deletions\":[],\"entities\":[{\"timestamp\":");
+    json_time(out, log_time);
+    out.push_str(
+        ",\"frame_id\":\"sdem\",\"id\":\"grains\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[",
+    );
+    let _ = write!(
+        out,
+        "{{\"key\":\"colour\",\"value\":\"mean grain stress, compression positive, viridis from 0 to {top:.4e}\"}},{{\"key\":\"step\",\"value\":\"{step}\"}},{{\"key\":\"solver\",\"value\":\"meshfree\"}}"
+    );
+    out.push_str("],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[");
+    // Outlines: a line loop per grain.
+    for (k, c) in contours.iter().enumerate() {
+        if k > 0 {
+            out.push(',');
+        }
+        out.push_str("{\"type\":1,");
+        out.push_str(identity);
+        let _ = write!(
+            out,
+            ",\"thickness\":{:.d$},\"scale_invariant\":false,\"points\":[",
+            0.03 * mean_radius,
+            d = decimals
+        );
+        for (i, &p) in c.points.iter().enumerate() {
+            if i > 0 {
+                out.push(',');
+            }
+            point(out, p);
+        }
+        out.push_str(
+            "],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}",
+        );
+    }
+    out.push_str("],\"triangles\":[");
+    // Fills: a fan from the area centroid (point 0) over the contour's edges.
+    for (k, c) in contours.iter().enumerate() {
+        if k > 0 {
+            out.push(',');
+        }
+        let t = if top > 0.0 {
+            (c.mean_stress_c / top).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let [r, g, b] = crate::output::render::viridis(t);
+        out.push('{');
+        out.push_str(identity);
+        out.push_str(",\"points\":[");
+        point(out, c.area_centroid().1);
+        for &p in &c.points {
+            out.push(',');
+            point(out, p);
+        }
+        let _ = write!(
+            out,
+            "],\"color\":{{\"r\":{:.3},\"g\":{:.3},\"b\":{:.3},\"a\":1}},\"colors\":[],\"indices\":[",
+            r as f64 / 255.0,
+            g as f64 / 255.0,
+            b as f64 / 255.0
+        );
+        let n = c.points.len();
+        for i in 0..n {
+            if i > 0 {
+                out.push(',');
+            }
+            let _ = write!(out, "0,{},{}", i + 1, (i + 1) % n + 1);
+        }
+        out.push_str("]}");
+    }
+    out.push_str("],\"texts\":[],\"models\":[]}");
+    encode_box(out, walls, log_time, mean_radius, decimals);
+    out.push_str("]}");
+}
+
+impl TrajectoryWriter {
+    /// Creates the log of a meshfree run: header, the channels `/contours`, `/walls`, `/macro`
+    /// and `/scene`, the scenario attachment and the `sdem.run` metadata (with
+    /// `solver=meshfree`). Frames go in with [`TrajectoryWriter::write_contour_frame`].
+    pub fn create_contours(
+        settings: &McapSettings,
+        scenario: &Scenario,
+        info: &ContourLogInfo,
+    ) -> Result<Self, WriteError> {
+        let (path, mut inner, handle) = Self::open_file(settings)?;
+        let contours = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_CONTOURS,
+            SCHEMA_CONTOURS,
+            "ros2msg",
+            CONTOURS_MSG,
+            "cdr",
+        )?;
+        let walls = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_WALLS,
+            SCHEMA_WALLS,
+            "ros2msg",
+            WALLS_MSG,
+            "cdr",
+        )?;
+        let macro_row = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_MACRO,
+            SCHEMA_MACRO,
+            "ros2msg",
+            MACRO_MSG,
+            "cdr",
+        )?;
+        let scene = add_channel(
+            &mut inner,
+            &path,
+            TOPIC_SCENE,
+            SCHEMA_SCENE,
+            "jsonschema",
+            CONTOUR_SCENE_SCHEMA,
+            "json",
+        )?;
+        attach_scenario(&mut inner, &path, scenario)?;
+        let scene_every = settings.scene_interval(info.grains);
+        let m = &scenario.material;
+        let run: BTreeMap<String, String> = [
+            ("format_version", FORMAT_VERSION.to_string()),
+            ("sdem_version", env!("CARGO_PKG_VERSION").to_string()),
+            ("solver", "meshfree".to_string()),
+            ("scenario", scenario.name.clone()),
+            ("grains", info.grains.to_string()),
+            ("seed", scenario.seed.to_string()),
+            ("young", format!("{:e}", m.young)),
+            ("poisson", format!("{}", m.poisson)),
+            ("density", format!("{:e}", m.density)),
+            ("model", format!("{:?}", scenario.model)),
+            ("dt", format!("{:e}", info.dt)),
+            ("boundary_nodes", info.boundary_nodes.to_string()),
+            ("output_every", scenario.output.every.to_string()),
+            (
+                "jamming_pressure",
+                format!("{:e}", scenario.output.jamming_pressure * m.young),
+            ),
+            ("scene_every", scene_every.to_string()),
+            (
+                "log_time",
+                "round(simulated time * 1e9) ns, strictly increasing".to_string(),
+            ),
+            (
+                "stress_sign",
+                "/contours: stress_* tension positive, mean_stress_c compression positive; \
+                 /macro: compression positive"
+                    .to_string(),
+            ),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
+        inner
+            .write_metadata(&records::Metadata {
+                name: "sdem.run".into(),
+                metadata: run,
+            })
+            .map_err(|error| WriteError::Mcap {
+                path: path.clone(),
+                error,
+            })?;
+        Ok(Self {
+            path,
+            inner,
+            file: handle,
+            replaces: None,
+            bodies: Bodies::Contours { contours },
+            walls,
+            macro_row,
+            scene,
+            scene_every,
+            sequence: 0,
+            last_log_time: None,
+            frames: 0,
+            buf: Vec::new(),
+            text: String::new(),
+        })
+    }
+
+    /// Logs a meshfree state: its grains' contours, the walls and the `macro.csv` row, at
+    /// simulated time `time` after `step` steps (and `/scene` on its interval).
+    pub fn write_contour_frame(
+        &mut self,
+        step: u64,
+        time: f64,
+        contours: &[FrameContour],
+        walls: &[Wall],
+        row: &Measures,
+    ) -> Result<(), WriteError> {
+        let Bodies::Contours { contours: channel } = self.bodies else {
+            return Err(self.io_error(std::io::Error::other(
+                "meshfree contours cannot go into a log of SDEM grains",
+            )));
+        };
+        let log_time = self.next_log_time(time);
+        let mut buf = std::mem::take(&mut self.buf);
+        encode_contours(&mut buf, step, time, contours);
+        self.put(channel, log_time, &buf)?;
+        encode_walls(&mut buf, step, time, walls);
+        self.put(self.walls, log_time, &buf)?;
+        encode_macro(&mut buf, row);
+        self.put(self.macro_row, log_time, &buf)?;
+        self.buf = buf;
+        if self.scene_every > 0 && self.frames % self.scene_every == 0 {
+            let mut text = std::mem::take(&mut self.text);
+            encode_contour_scene(&mut text, step, contours, walls, log_time);
+            self.put(self.scene, log_time, text.as_bytes())?;
+            self.text = text;
+        }
+        self.frames += 1;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(grain: u32, at: DVec2, side: f64) -> FrameContour {
+        FrameContour {
+            grain,
+            stress: [-1.0, -3.0, 0.5],
+            mean_stress_c: 2.0,
+            points: [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+                .iter()
+                .map(|&(x, y)| at + side * DVec2::new(x, y))
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn contours_round_trip_and_truncations_are_errors() {
+        let contours = vec![
+            square(0, DVec2::ZERO, 1.0),
+            FrameContour {
+                points: vec![
+                    DVec2::new(3.0, 0.0),
+                    DVec2::new(4.0, 0.0),
+                    DVec2::new(3.5, 1.0),
+                ],
+                ..square(1, DVec2::ZERO, 1.0)
+            },
+        ];
+        let mut buf = Vec::new();
+        encode_contours(&mut buf, 7, 0.25, &contours);
+        let (step, time, back) = decode_contours(&buf).unwrap();
+        assert_eq!((step, time), (7, 0.25));
+        assert_eq!(back, contours);
+        for cut in 0..buf.len() {
+            assert!(decode_contours(&buf[..cut]).is_err(), "{cut}");
+        }
+    }
+
+    #[test]
+    fn area_centroid_of_a_square() {
+        let (a, c) = square(0, DVec2::new(2.0, 1.0), 2.0).area_centroid();
+        assert!((a - 4.0).abs() < 1e-12 && (c - DVec2::new(3.0, 2.0)).length() < 1e-12);
+    }
+
+    #[test]
+    fn the_scene_is_json_with_a_fan_and_a_loop_per_grain() {
+        let contours = vec![square(0, DVec2::ZERO, 1.0), square(1, DVec2::X * 2.0, 1.0)];
+        let walls = crate::boundary::walls::box_walls(0.0, 4.0, 0.0, 2.0);
+        let mut text = String::new();
+        encode_contour_scene(&mut text, 3, &contours, &walls, 1_500_000_000);
+        // Balanced brackets outside strings (the text has no escaped quotes).
+        let mut depth = 0i32;
+        let mut in_string = false;
+        for ch in text.chars() {
+            match ch {
+                '"' => in_string = !in_string,
+                '{' | '[' if !in_string => depth += 1,
+                '}' | ']' if !in_string => {
+                    depth -= 1;
+                    assert!(depth >= 0, "{text}");
+                }
+                _ => {}
+            }
+        }
+        assert_eq!(depth, 0, "{text}");
+        // Two outlines and the box as line loops, two fans of four triangles each.
+        assert_eq!(text.matches("{\"type\":1,").count(), 3, "{text}");
+        assert_eq!(
+            text.matches("\"indices\":[0,1,2,0,2,3,0,3,4,0,4,1]")
+                .count(),
+            2,
+            "{text}"
+        );
+        assert!(text.contains("\"id\":\"box\""));
+        assert!(
+            text.contains("{\"x\":0.5000,\"y\":0.5000,\"z\":0}"),
+            "{text}"
+        );
+    }
+}
