@@ -45,6 +45,23 @@ pub struct SampleGrain {
 /// contours of the sample's radii placed anew without overlap.
 pub fn sample_grains(scenario: &Scenario) -> Result<Vec<SampleGrain>, RunError> {
     let s = &scenario.sample;
+    if let Some(GrainShapes::File(file)) = &s.shapes {
+        let Some(loaded) = &s.loaded_shapes else {
+            return Err(RunError::Setup(format!(
+                "scenario {}: the shape file {} has not been read (Scenario::load reads it)",
+                scenario.name,
+                file.display()
+            )));
+        };
+        return Ok(loaded
+            .grains
+            .iter()
+            .map(|(centre, shape)| SampleGrain {
+                shape: shape.clone(),
+                centre: *centre,
+            })
+            .collect());
+    }
     let (x0, y0) = s.origin;
     let discs: Vec<([f64; 2], f64)> = match (&s.loaded, s.spec()) {
         (Some(loaded), _) => loaded
@@ -64,6 +81,7 @@ pub fn sample_grains(scenario: &Scenario) -> Result<Vec<SampleGrain>, RunError> 
         }
     };
     match s.shapes.as_ref().unwrap_or(&GrainShapes::Discs) {
+        GrainShapes::File(_) => unreachable!("handled above"),
         GrainShapes::Discs => Ok(discs
             .into_iter()
             .map(|(centre, radius)| SampleGrain {
@@ -225,15 +243,19 @@ impl Meshfree {
             }
         };
         let state = assembly.initial_state();
-        let last = assembly
-            .evaluate(&state.u, &state.multipliers, 0.0, None, false)
+        // Any positive stiffness makes a penetrating node an active element.
+        let probe = assembly
+            .evaluate(&state.u, &state.multipliers, 1.0, None, false)
             .map_err(|e| RunError::Setup(format!("meshfree initial state: {e}")))?;
-        if let Some(e) = last.elements.iter().find(|e| e.gap < 0.0) {
+        if let Some(e) = probe.elements.iter().find(|e| e.gap < 0.0) {
             return Err(RunError::Setup(format!(
                 "meshfree grains overlap at the start: node {} of grain {} is {:.3e} inside {:?}",
                 e.key.node, e.key.slave, -e.gap, e.key.master
             )));
         }
+        let last = assembly
+            .evaluate(&state.u, &state.multipliers, 0.0, None, false)
+            .map_err(|e| RunError::Setup(format!("meshfree initial state: {e}")))?;
         Ok(Self {
             assembly,
             last_good: (0, state.clone()),

@@ -15,6 +15,7 @@ use crate::grain::Grain;
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
 use crate::integration::parameters::{Adaptive, critical_time_step};
+use crate::meshfree::shape::{ShapeFileError, StarShape, read_shape_file};
 use crate::meshfree::{HyperelasticLaw, SolverSettings, TimeScheme};
 use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
 use crate::sample::{MAX_COUNT, RadiusDistribution, SampleError, SampleSpec};
@@ -82,6 +83,9 @@ pub struct SampleSettings {
     /// checkpoint sets the radii of its grains). Not part of the scenario's text.
     #[serde(skip)]
     pub loaded: Option<Arc<LoadedSample>>,
+    /// The grains of `shapes: File(...)` once read ([`Scenario::load`]).
+    #[serde(skip)]
+    pub loaded_shapes: Option<Arc<LoadedShapes>>,
 }
 
 fn is_zero_origin(o: &(f64, f64)) -> bool {
@@ -145,6 +149,9 @@ impl SampleSettings {
 
     /// Number of grains: `count`, or the file's once read (0 if neither is known).
     pub fn grain_count(&self) -> usize {
+        if let Some(l) = &self.loaded_shapes {
+            return l.grains.len();
+        }
         match (&self.loaded, self.count) {
             (Some(l), _) => l.grains.len(),
             (None, Some(n)) => n,
@@ -183,6 +190,26 @@ impl SampleSettings {
                 positive("sample.box_width", self.box_width)?;
                 positive("sample.box_height", self.box_height)?;
             }
+            None if matches!(self.shapes, Some(GrainShapes::File(_))) => {
+                if self.radii.is_some() {
+                    return Err(invalid(
+                        "sample.radii",
+                        "given together with sample.shapes: File(...)",
+                        "left out: the shape file gives the grains",
+                    ));
+                }
+                if let Some(GrainShapes::File(f)) = &self.shapes
+                    && f.as_os_str().is_empty()
+                {
+                    return Err(invalid(
+                        "sample.shapes",
+                        "File(\"\")",
+                        "the path of a shape file",
+                    ));
+                }
+                positive("sample.box_width", self.box_width)?;
+                positive("sample.box_height", self.box_height)?;
+            }
             None => {
                 if self.count.is_none() {
                     return Err(invalid(
@@ -207,6 +234,53 @@ impl SampleSettings {
 
     fn validate(&self) -> Result<(), ScenarioError> {
         self.validate_fields()?;
+        if self.file.is_some() && matches!(self.shapes, Some(GrainShapes::File(_))) {
+            return Err(invalid(
+                "sample.shapes",
+                "File(...) together with sample.file",
+                "one of them: the shape file gives both shapes and positions",
+            ));
+        }
+        if let Some(GrainShapes::File(f)) = &self.shapes {
+            let Some(loaded) = &self.loaded_shapes else {
+                return Err(invalid(
+                    "sample.shapes",
+                    format!("File({:?})", f.display().to_string()),
+                    "read before the scenario is used (Scenario::load reads it)",
+                ));
+            };
+            let n = loaded.grains.len();
+            if let Some(count) = self.count
+                && count != n
+            {
+                return Err(invalid(
+                    "sample.count",
+                    count,
+                    &format!(
+                        "the number of grains in {} ({n}), or left out",
+                        loaded.path.display()
+                    ),
+                ));
+            }
+            let b = self.bounds();
+            for (k, (c, shape)) in loaded.grains.iter().enumerate() {
+                let r = shape.max_radius();
+                if c[0] - r < b.x0 || c[0] + r > b.x1 || c[1] - r < b.y0 || c[1] + r > b.y1 {
+                    return Err(invalid(
+                        "sample.shapes",
+                        format!(
+                            "grain {k} of {} (centroid ({}, {}), radius up to {})",
+                            loaded.path.display(),
+                            num(c[0]),
+                            num(c[1]),
+                            num(r)
+                        ),
+                        "inside the box [x0, x1] x [y0, y1] of the sample",
+                    ));
+                }
+            }
+            return Ok(());
+        }
         if let Some(spec) = self.spec() {
             return Ok(spec.validate()?);
         }
@@ -425,6 +499,19 @@ pub enum GrainShapes {
     /// "Sand-like" contours: random Fourier shape descriptors about each grain's radius
     /// (SPEC §10b), seeded by the scenario's seed.
     SandLike,
+    /// Polygons read from a file (format: [`crate::meshfree::shape::read_shape_file`]), in
+    /// the box's coordinates, relative to the scenario file's folder: they give the grains'
+    /// shapes and positions (no `count`, `radii` or `file` then).
+    File(PathBuf),
+}
+
+/// The grains of a shape file, as read and checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedShapes {
+    /// The file as opened.
+    pub path: PathBuf,
+    /// Each grain's centroid (in the file's coordinates) and contour about it.
+    pub grains: Vec<([f64; 2], StarShape)>,
 }
 
 /// What to do when a contact leaves the domain of the secant law (SPEC §5).
@@ -570,6 +657,8 @@ pub enum ScenarioError {
     Sample(#[from] SampleError),
     #[error(transparent)]
     SampleFile(#[from] SampleFileError),
+    #[error(transparent)]
+    ShapeFile(#[from] ShapeFileError),
 }
 
 fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> ScenarioError {
@@ -625,9 +714,14 @@ impl Scenario {
             source,
         })?;
         let mut scenario = Self::parse(&text, &path.display().to_string())?;
+        let base = path.parent().unwrap_or(Path::new(""));
         if scenario.sample.file.is_some() {
-            let base = path.parent().unwrap_or(Path::new(""));
             scenario.load_sample(base)?;
+        }
+        if let Some(GrainShapes::File(file)) = &scenario.sample.shapes {
+            let path = base.join(file);
+            let grains = read_shape_file(&path)?;
+            scenario.sample.loaded_shapes = Some(Arc::new(LoadedShapes { path, grains }));
         }
         let warnings = scenario.validate()?;
         Ok((scenario, warnings))
