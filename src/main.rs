@@ -424,6 +424,17 @@ fn run(cli: Cli) -> Result<()> {
                     "model: meshfree, {} boundary nodes per grain, {:?} law, {:?} scheme (implicit: no critical step)",
                     m.boundary_nodes, m.law, m.scheme
                 );
+                let built = sdem::run::meshfree::Meshfree::new(&parsed)?;
+                let grains = &built.assembly.grains;
+                let nodes: usize = grains.iter().map(|g| g.node_count()).sum();
+                let gauss: usize = grains.iter().map(|g| g.gauss_count()).sum();
+                println!(
+                    "discretization: {} grains, {nodes} field nodes ({} to {} per grain), {} DoF, {gauss} Gauss points",
+                    grains.len(),
+                    grains.iter().map(|g| g.node_count()).min().unwrap_or(0),
+                    grains.iter().map(|g| g.node_count()).max().unwrap_or(0),
+                    built.assembly.dofs()
+                );
             } else {
                 println!(
                     "critical time step estimate: {:.4e}",
