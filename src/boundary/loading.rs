@@ -288,7 +288,9 @@ impl LoadingProgram {
             StopWhen::MeanStress(p) => state.mean_stress() >= *p,
             StopWhen::Jammed => state.jammed,
             StopWhen::Steps(n) => step - self.phase_start_step >= *n,
-            StopWhen::Time(t) => time - self.phase_start_time >= *t,
+            // Relative slack for the rounding of a time summed step by step (400 steps of 0.01
+            // add up to 3.99999999999996, not 4).
+            StopWhen::Time(t) => time - self.phase_start_time >= *t * (1.0 - 1e-12),
             StopWhen::Strain(e) => 1.0 - box_size(walls).0 / self.phase_start_size.0 >= *e,
             StopWhen::VerticalStrain(e) => 1.0 - box_size(walls).1 / self.phase_start_size.1 >= *e,
             StopWhen::Any(list) => list

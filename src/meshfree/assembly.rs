@@ -239,6 +239,17 @@ impl ContactPattern {
     }
 }
 
+/// One grain's share of an evaluation.
+struct GrainTerms {
+    /// `f_int - f_ext` (+ inertia and damping) on the grain's DoF.
+    residual: Vec<f64>,
+    /// Tangent blocks on the grain's pattern (empty without tangent).
+    blocks: Vec<[f64; 4]>,
+    energy: f64,
+    /// Largest magnitude of the terms summed into `residual`.
+    scale: f64,
+}
+
 /// Current boundary positions of a grain.
 fn contour(model: &GrainModel, u: &[f64]) -> Vec<[f64; 2]> {
     (0..model.nodes.boundary_count)
@@ -501,7 +512,7 @@ impl Assembly {
     ) -> Result<Evaluation, MeshfreeError> {
         let (alpha, beta) = self.rayleigh;
         // Per grain: internal forces, dynamic terms, tangent blocks.
-        let per_grain: Vec<(Vec<f64>, Vec<[f64; 4]>, f64, f64)> = (0..self.grains.len())
+        let per_grain: Vec<GrainTerms> = (0..self.grains.len())
             .into_par_iter()
             .map(|g| {
                 let model = &self.grains[g];
@@ -559,7 +570,12 @@ impl Assembly {
                         }
                     }
                 }
-                Ok((r, blocks, energy, scale))
+                Ok(GrainTerms {
+                    residual: r,
+                    blocks,
+                    energy,
+                    scale,
+                })
             })
             .collect::<Result<_, MeshfreeError>>()?;
         let contours: Vec<Vec<[f64; 2]>> = self
@@ -588,10 +604,10 @@ impl Assembly {
         // Gather in a fixed order.
         let mut residual = Vec::with_capacity(self.dofs());
         let (mut elastic_energy, mut force_scale) = (0.0, 0.0f64);
-        for (r, _, e, s) in &per_grain {
-            residual.extend_from_slice(r);
-            elastic_energy += e;
-            force_scale = force_scale.max(*s);
+        for t in &per_grain {
+            residual.extend_from_slice(&t.residual);
+            elastic_energy += t.energy;
+            force_scale = force_scale.max(t.scale);
         }
         for e in &elements {
             for (&dof, f) in e.dofs.iter().zip(&e.force) {
@@ -603,7 +619,7 @@ impl Assembly {
             residual[i] = 0.0;
         }
         let grain_blocks = if with_tangent {
-            per_grain.into_iter().map(|p| p.1).collect()
+            per_grain.into_iter().map(|p| p.blocks).collect()
         } else {
             Vec::new()
         };
