@@ -65,6 +65,40 @@ pub struct ContactElement {
     pub stiffness: Vec<f64>,
 }
 
+impl ContactElement {
+    /// An element of `N` DoF: `[gap, pressure, tributary]`, `normal` and slave `point` as
+    /// evaluated; its DoF those of `nodes` (each group: a grain's DoF offset and node
+    /// indices, in the order of `force`); `stiffness` only when the tangent was asked for.
+    fn new<const N: usize>(
+        key: ContactKey,
+        [gap, pressure, tributary]: [f64; 3],
+        normal: [f64; 2],
+        point: [f64; 2],
+        nodes: &[(usize, &[usize])],
+        force: &[f64; N],
+        stiffness: Option<&[[f64; N]; N]>,
+    ) -> Self {
+        let mut dofs = Vec::with_capacity(N);
+        for &(offset, group) in nodes {
+            for &a in group {
+                dofs.extend([offset + 2 * a, offset + 2 * a + 1]);
+            }
+        }
+        debug_assert_eq!(dofs.len(), N);
+        ContactElement {
+            key,
+            gap,
+            pressure,
+            tributary,
+            normal,
+            point,
+            dofs,
+            force: force.to_vec(),
+            stiffness: stiffness.map_or_else(Vec::new, |k| k.iter().flatten().copied().collect()),
+        }
+    }
+}
+
 /// Residual, contact elements and energies at one displacement.
 #[derive(Debug, Clone, Default)]
 pub struct Evaluation {
@@ -438,28 +472,15 @@ impl Assembly {
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                let mut dofs = Vec::with_capacity(14);
-                for a in slave_nodes {
-                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
-                }
-                for a in master_nodes {
-                    dofs.extend([off_j + 2 * a, off_j + 2 * a + 1]);
-                }
-                out.push(ContactElement {
+                out.push(ContactElement::new(
                     key,
-                    gap: e.gap,
-                    pressure: e.pressure,
-                    tributary: e.tributary,
-                    normal: e.normal,
-                    point: xs,
-                    dofs,
-                    force: e.force.to_vec(),
-                    stiffness: if with_tangent {
-                        e.stiffness.iter().flatten().copied().collect()
-                    } else {
-                        Vec::new()
-                    },
-                });
+                    [e.gap, e.pressure, e.tributary],
+                    e.normal,
+                    xs,
+                    &[(off_i, &slave_nodes), (off_j, &master_nodes)],
+                    &e.force,
+                    with_tangent.then_some(&e.stiffness),
+                ));
             }
         }
         for (w, wall) in self.walls.iter().enumerate() {
@@ -476,25 +497,15 @@ impl Assembly {
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                let mut dofs = Vec::with_capacity(6);
-                for a in nodes {
-                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
-                }
-                out.push(ContactElement {
+                out.push(ContactElement::new(
                     key,
-                    gap: e.gap,
-                    pressure: e.pressure,
-                    tributary: e.tributary,
-                    normal: n,
-                    point: x[1],
-                    dofs,
-                    force: e.force.to_vec(),
-                    stiffness: if with_tangent {
-                        e.stiffness.iter().flatten().copied().collect()
-                    } else {
-                        Vec::new()
-                    },
-                });
+                    [e.gap, e.pressure, e.tributary],
+                    n,
+                    x[1],
+                    &[(off_i, &nodes)],
+                    &e.force,
+                    with_tangent.then_some(&e.stiffness),
+                ));
             }
         }
         out
