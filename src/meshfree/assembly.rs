@@ -22,7 +22,9 @@ use super::MeshfreeError;
 use super::contact::wall_node_element;
 use super::model::{Dense, GrainModel};
 use super::nts;
-use super::solver::{DynamicTerms, SolveStats, SolverSettings, TimeScheme};
+use super::solver::{
+    DynamicTerms, SolveStats, SolverSettings, TimeScheme, finite_residual_norm, newton_update,
+};
 use super::sparse::{SparseSolver, TripletMatrix};
 use crate::boundary::walls::Wall;
 
@@ -699,15 +701,7 @@ impl Assembly {
         let mut tangent = TripletMatrix::new(self.dofs());
         let mut eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         for _ in 0..self.settings.max_newton {
-            let norm = eval
-                .residual
-                .iter()
-                .fold(0.0f64, |s, v| s.max(v.abs()));
-            if !norm.is_finite() {
-                return Err(MeshfreeError::NotConverged(
-                    "the residual is not finite (NaN or infinity)".into(),
-                ));
-            }
+            let norm = finite_residual_norm(&eval.residual)?;
             if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
                 return Ok(eval);
             }
@@ -716,22 +710,7 @@ impl Assembly {
             self.fill_tangent(&with_tangent, &mut tangent);
             let mut du: Vec<f64> = with_tangent.residual.iter().map(|v| -v).collect();
             self.solver.solve(&tangent, &mut du)?;
-            let mut step = 1.0;
-            let mut accepted = false;
-            for _ in 0..30 {
-                let trial: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + step * d).collect();
-                if self.all_points_valid(&trial) {
-                    *u = trial;
-                    accepted = true;
-                    break;
-                }
-                step *= 0.5;
-            }
-            if !accepted {
-                return Err(MeshfreeError::NotConverged(
-                    "every Newton step inverts the material (det F <= 0)".into(),
-                ));
-            }
+            newton_update(u, &du, |trial| self.all_points_valid(trial))?;
             eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         }
         let norm = eval
