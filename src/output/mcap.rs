@@ -889,7 +889,9 @@ fn json_line_loop(out: &mut String, points: &[DVec2], thickness: f64, decimals: 
         }
         json_point(out, p, decimals);
     }
-    out.push_str("],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}");
+    out.push_str(
+        "],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}",
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

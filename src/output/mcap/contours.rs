@@ -239,8 +239,12 @@ impl TrajectoryWriter {
                 ("boundary_nodes", info.boundary_nodes.to_string()),
             ],
         };
-        let (writer, _, _) =
-            Self::create_log(settings, scenario, CONTOUR_SCENE_SCHEMA, info, |inner, path| {
+        let (writer, _, _) = Self::create_log(
+            settings,
+            scenario,
+            CONTOUR_SCENE_SCHEMA,
+            info,
+            |inner, path| {
                 let contours = add_channel(
                     inner,
                     path,
@@ -251,7 +255,8 @@ impl TrajectoryWriter {
                     "cdr",
                 )?;
                 Ok(Bodies::Contours { contours })
-            })?;
+            },
+        )?;
         Ok(writer)
     }
 
