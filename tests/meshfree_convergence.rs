@@ -9,78 +9,26 @@
 //!
 //! With `SDEM_CONVERGENCE_CSV=<folder>` set, each test also writes its table there as CSV.
 
-use glam::DVec2;
-use sdem::boundary::walls::Wall;
-use sdem::meshfree::assembly::{Assembly, ContactMultipliers};
-use sdem::meshfree::{
-    DiscNodes, GrainModel, Hyperelastic, HyperelasticLaw, NodeDensity, NodeSet, SolverSettings,
-};
+mod common;
+
+use common::meshfree::{column, settings};
 use sdem::run::{RunOptions, run_scenario};
 use sdem::scenario::Scenario;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const RADIUS: f64 = 0.5;
-
-fn disc_at(centre: [f64; 2], boundary_nodes: usize, nu: f64) -> GrainModel {
-    let mut nodes: NodeSet = DiscNodes::disc(RADIUS, NodeDensity::new(boundary_nodes))
-        .unwrap()
-        .into();
-    for p in &mut nodes.positions {
-        p[0] += centre[0];
-        p[1] += centre[1];
-    }
-    let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, 1.0, nu, 1.0).unwrap();
-    GrainModel::from_nodes(nodes, material).unwrap()
-}
-
-fn settings() -> SolverSettings {
-    SolverSettings {
-        k0: 1.0 / RADIUS,
-        alpha_k: 2.0,
-        gap_tolerance: 1e-7,
-        force_tolerance: 1e-12,
-        max_newton: 40,
-        max_augmentations: 40,
-    }
-}
-
 /// Force on the top wall after each of `steps` load steps of a quasi-static compression of two
 /// touching discs (centred on x = 0, E = 1) between a bottom and a top wall, which each move in
-/// by `approach / 2` in all. As `column()` of `tests/meshfree_multibody.rs`.
+/// by `approach / 2` in all: [`common::meshfree::column`] of two discs.
 fn two_disc_forces(boundary_nodes: usize, nu: f64, approach: f64, steps: usize) -> Vec<f64> {
-    let discs = 2;
-    let height = 2.0 * RADIUS * discs as f64;
-    let grains: Vec<GrainModel> = (0..discs)
-        .map(|k| disc_at([0.0, RADIUS * (2 * k + 1) as f64], boundary_nodes, nu))
-        .collect();
-    let walls = vec![
-        Wall::new(DVec2::new(0.0, 0.0), DVec2::Y),
-        Wall::new(DVec2::new(0.0, height), -DVec2::Y),
-    ];
-    let mut a = Assembly::new(grains, walls, [0.0, 0.0], (0.0, 0.0), settings()).unwrap();
-    // The x DoF of each disc's top and bottom nodes hold the rigid modes left free.
-    let nb = boundary_nodes;
-    a.fixed = (0..discs)
-        .flat_map(|g| [nb / 4, 3 * nb / 4].map(|s| a.offset(g) + 2 * s))
-        .collect();
-    let mut u = vec![0.0; a.dofs()];
-    let mut mult = ContactMultipliers::new();
-    let mut force = Vec::new();
-    for step in 1..=steps {
-        let d = 0.5 * approach * step as f64 / steps as f64;
-        a.walls[0].point.y = d;
-        a.walls[1].point.y = height - d;
-        let (eval, stats) = a.solve_static(&mut u, &mut mult).unwrap();
-        assert!(
-            stats.max_penetration <= settings().gap_tolerance,
-            "penetration {:e}",
-            stats.max_penetration
-        );
-        force.push(eval.wall_force(1)[1]);
-    }
-    force
+    let two = column(2, boundary_nodes, nu, approach, steps);
+    assert!(
+        two.penetration <= settings().gap_tolerance,
+        "penetration {:e}",
+        two.penetration
+    );
+    two.force
 }
 
 /// One row of a convergence table: a quantity at successive densities N (each the last times a

@@ -22,7 +22,9 @@ use super::MeshfreeError;
 use super::contact::wall_node_element;
 use super::model::{Dense, GrainModel};
 use super::nts;
-use super::solver::{DynamicTerms, SolveStats, SolverSettings, TimeScheme};
+use super::solver::{
+    DynamicTerms, SolveStats, SolverSettings, TimeScheme, finite_residual_norm, newton_update,
+};
 use super::sparse::{SparseSolver, TripletMatrix};
 use crate::boundary::walls::Wall;
 
@@ -63,6 +65,40 @@ pub struct ContactElement {
     pub force: Vec<f64>,
     /// `d force / d x`, row-major `dofs.len()` squared (empty without tangent).
     pub stiffness: Vec<f64>,
+}
+
+impl ContactElement {
+    /// An element of `N` DoF: `[gap, pressure, tributary]`, `normal` and slave `point` as
+    /// evaluated; its DoF those of `nodes` (each group: a grain's DoF offset and node
+    /// indices, in the order of `force`); `stiffness` only when the tangent was asked for.
+    fn new<const N: usize>(
+        key: ContactKey,
+        [gap, pressure, tributary]: [f64; 3],
+        normal: [f64; 2],
+        point: [f64; 2],
+        nodes: &[(usize, &[usize])],
+        force: &[f64; N],
+        stiffness: Option<&[[f64; N]; N]>,
+    ) -> Self {
+        let mut dofs = Vec::with_capacity(N);
+        for &(offset, group) in nodes {
+            for &a in group {
+                dofs.extend([offset + 2 * a, offset + 2 * a + 1]);
+            }
+        }
+        debug_assert_eq!(dofs.len(), N);
+        ContactElement {
+            key,
+            gap,
+            pressure,
+            tributary,
+            normal,
+            point,
+            dofs,
+            force: force.to_vec(),
+            stiffness: stiffness.map_or_else(Vec::new, |k| k.iter().flatten().copied().collect()),
+        }
+    }
 }
 
 /// Residual, contact elements and energies at one displacement.
@@ -438,28 +474,15 @@ impl Assembly {
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                let mut dofs = Vec::with_capacity(14);
-                for a in slave_nodes {
-                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
-                }
-                for a in master_nodes {
-                    dofs.extend([off_j + 2 * a, off_j + 2 * a + 1]);
-                }
-                out.push(ContactElement {
+                out.push(ContactElement::new(
                     key,
-                    gap: e.gap,
-                    pressure: e.pressure,
-                    tributary: e.tributary,
-                    normal: e.normal,
-                    point: xs,
-                    dofs,
-                    force: e.force.to_vec(),
-                    stiffness: if with_tangent {
-                        e.stiffness.iter().flatten().copied().collect()
-                    } else {
-                        Vec::new()
-                    },
-                });
+                    [e.gap, e.pressure, e.tributary],
+                    e.normal,
+                    xs,
+                    &[(off_i, &slave_nodes), (off_j, &master_nodes)],
+                    &e.force,
+                    with_tangent.then_some(&e.stiffness),
+                ));
             }
         }
         for (w, wall) in self.walls.iter().enumerate() {
@@ -476,25 +499,15 @@ impl Assembly {
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                let mut dofs = Vec::with_capacity(6);
-                for a in nodes {
-                    dofs.extend([off_i + 2 * a, off_i + 2 * a + 1]);
-                }
-                out.push(ContactElement {
+                out.push(ContactElement::new(
                     key,
-                    gap: e.gap,
-                    pressure: e.pressure,
-                    tributary: e.tributary,
-                    normal: n,
-                    point: x[1],
-                    dofs,
-                    force: e.force.to_vec(),
-                    stiffness: if with_tangent {
-                        e.stiffness.iter().flatten().copied().collect()
-                    } else {
-                        Vec::new()
-                    },
-                });
+                    [e.gap, e.pressure, e.tributary],
+                    n,
+                    x[1],
+                    &[(off_i, &nodes)],
+                    &e.force,
+                    with_tangent.then_some(&e.stiffness),
+                ));
             }
         }
         out
@@ -688,15 +701,7 @@ impl Assembly {
         let mut tangent = TripletMatrix::new(self.dofs());
         let mut eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         for _ in 0..self.settings.max_newton {
-            let norm = eval
-                .residual
-                .iter()
-                .fold(0.0f64, |s, v| s.max(v.abs()));
-            if !norm.is_finite() {
-                return Err(MeshfreeError::NotConverged(
-                    "the residual is not finite (NaN or infinity)".into(),
-                ));
-            }
+            let norm = finite_residual_norm(&eval.residual)?;
             if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
                 return Ok(eval);
             }
@@ -705,22 +710,7 @@ impl Assembly {
             self.fill_tangent(&with_tangent, &mut tangent);
             let mut du: Vec<f64> = with_tangent.residual.iter().map(|v| -v).collect();
             self.solver.solve(&tangent, &mut du)?;
-            let mut step = 1.0;
-            let mut accepted = false;
-            for _ in 0..30 {
-                let trial: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + step * d).collect();
-                if self.all_points_valid(&trial) {
-                    *u = trial;
-                    accepted = true;
-                    break;
-                }
-                step *= 0.5;
-            }
-            if !accepted {
-                return Err(MeshfreeError::NotConverged(
-                    "every Newton step inverts the material (det F <= 0)".into(),
-                ));
-            }
+            newton_update(u, &du, |trial| self.all_points_valid(trial))?;
             eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         }
         let norm = eval

@@ -138,6 +138,39 @@ impl<'a> DynamicTerms<'a> {
     }
 }
 
+/// The largest magnitude of a Newton residual; an error if it is not finite.
+pub(crate) fn finite_residual_norm(r: &[f64]) -> Result<f64, MeshfreeError> {
+    let norm = r.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    if !norm.is_finite() {
+        return Err(MeshfreeError::NotConverged(
+            "the residual is not finite (NaN or infinity)".into(),
+        ));
+    }
+    Ok(norm)
+}
+
+/// Applies a Newton correction `du` to `u` with step length control: `u + alpha du` for
+/// alpha = 1, 1/2, 1/4, … (30 tries), the first at which `valid` holds (no material point
+/// inverted). An error if none does.
+pub(crate) fn newton_update(
+    u: &mut Vec<f64>,
+    du: &[f64],
+    valid: impl Fn(&[f64]) -> bool,
+) -> Result<(), MeshfreeError> {
+    let mut alpha = 1.0;
+    for _ in 0..30 {
+        let trial: Vec<f64> = u.iter().zip(du).map(|(u, d)| u + alpha * d).collect();
+        if valid(&trial) {
+            *u = trial;
+            return Ok(());
+        }
+        alpha *= 0.5;
+    }
+    Err(MeshfreeError::NotConverged(
+        "every Newton step inverts the material (det F <= 0)".into(),
+    ))
+}
+
 /// Solves `K x = b` in place (dense LU with partial pivoting, sequential). `k` is overwritten.
 pub fn lu_solve(k: &mut Dense, b: &mut [f64]) -> Result<(), MeshfreeError> {
     let n = k.n;
@@ -264,12 +297,7 @@ impl Problem<'_> {
         let mut last_norm = f64::INFINITY;
         for _ in 0..self.settings.max_newton {
             let (r, states) = self.residual(u, multipliers, k, dynamic, Some(&mut tangent))?;
-            let norm = r.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-            if !norm.is_finite() {
-                return Err(MeshfreeError::NotConverged(
-                    "the residual is not finite (NaN or infinity)".into(),
-                ));
-            }
+            let norm = finite_residual_norm(&r)?;
             last_norm = norm;
             if norm <= self.settings.force_tolerance {
                 return Ok(states);
@@ -277,23 +305,7 @@ impl Problem<'_> {
             stats.newton_iterations += 1;
             let mut du: Vec<f64> = r.iter().map(|v| -v).collect();
             lu_solve(&mut tangent, &mut du)?;
-            // Step length control: halve until no material point is inverted.
-            let mut alpha = 1.0;
-            let mut accepted = false;
-            for _ in 0..30 {
-                let trial: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + alpha * d).collect();
-                if self.model.all_points_valid(&trial) {
-                    *u = trial;
-                    accepted = true;
-                    break;
-                }
-                alpha *= 0.5;
-            }
-            if !accepted {
-                return Err(MeshfreeError::NotConverged(
-                    "every Newton step inverts the material (det F <= 0)".into(),
-                ));
-            }
+            newton_update(u, &du, |trial| self.model.all_points_valid(trial))?;
         }
         Err(MeshfreeError::NotConverged(format!(
             "Newton did not converge in {} iterations (residual {last_norm:.3e} > {:.1e})",

@@ -40,7 +40,7 @@
 
 use crate::boundary::walls::Wall;
 use crate::geometry::GrainShape;
-use crate::grain::Grain;
+use crate::grain::{Grain, Material};
 use crate::integration::World;
 use crate::output::measures::Measures;
 use crate::scenario::Scenario;
@@ -151,11 +151,17 @@ uint64 grains_volumetric
 uint64 grains_full
 ";
 
-/// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that `/scene` uses (entities
-/// made of cylinders and lines).
-pub const SCENE_SCHEMA: &str = r##"{
+/// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that a `/scene` uses, as a
+/// literal: `$what` closes its description, `$defs` are the definitions of primitives it adds
+/// (whole lines) and `$triangles` the schema of an entity's `triangles`.
+macro_rules! scene_schema {
+    ($what:literal, $defs:literal, $triangles:literal) => {
+        concat!(
+            r##"{
   "title": "foxglove.SceneUpdate",
-  "description": "An update to the entities displayed in a 3D scene (subset written by sdem: cylinders and lines)",
+  "description": "An update to the entities displayed in a 3D scene (subset written by sdem"##,
+            $what,
+            r##")",
   "type": "object",
   "$defs": {
     "time": {"type": "object", "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}},
@@ -164,7 +170,9 @@ pub const SCENE_SCHEMA: &str = r##"{
     "pose": {"type": "object", "properties": {"position": {"$ref": "#/$defs/vector3"}, "orientation": {"$ref": "#/$defs/quaternion"}}},
     "color": {"type": "object", "properties": {"r": {"type": "number"}, "g": {"type": "number"}, "b": {"type": "number"}, "a": {"type": "number"}}},
     "cylinder": {"title": "foxglove.CylinderPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "size": {"$ref": "#/$defs/vector3"}, "bottom_scale": {"type": "number"}, "top_scale": {"type": "number"}, "color": {"$ref": "#/$defs/color"}}},
-    "line": {"title": "foxglove.LinePrimitive", "type": "object", "properties": {"type": {"type": "integer"}, "pose": {"$ref": "#/$defs/pose"}, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}}
+"##,
+            $defs,
+            r##"    "line": {"title": "foxglove.LinePrimitive", "type": "object", "properties": {"type": {"type": "integer"}, "pose": {"$ref": "#/$defs/pose"}, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}}
   },
   "properties": {
     "deletions": {"type": "array", "items": {"type": "object"}},
@@ -178,11 +186,21 @@ pub const SCENE_SCHEMA: &str = r##"{
       "arrows": {"type": "array"}, "cubes": {"type": "array"}, "spheres": {"type": "array"},
       "cylinders": {"type": "array", "items": {"$ref": "#/$defs/cylinder"}},
       "lines": {"type": "array", "items": {"$ref": "#/$defs/line"}},
-      "triangles": {"type": "array"}, "texts": {"type": "array"}, "models": {"type": "array"}
+      "triangles": "##,
+            $triangles,
+            r##", "texts": {"type": "array"}, "models": {"type": "array"}
     }}}
   }
 }
-"##;
+"##
+        )
+    };
+}
+use scene_schema;
+
+/// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that `/scene` uses (entities
+/// made of cylinders and lines).
+pub const SCENE_SCHEMA: &str = scene_schema!(": cylinders and lines", "", r#"{"type": "array"}"#);
 
 /// Errors of the trajectory writer.
 #[derive(Debug, thiserror::Error)]
@@ -758,16 +776,7 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
         .collect();
     let top = stress_colour_max(&mean_c);
 
-    out.push_str("{\"deletions\":[],\"entities\":[{\"timestamp\":");
-    json_time(out, log_time);
-    out.push_str(
-        ",\"frame_id\":\"sdem\",\"id\":\"grains\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[",
-    );
-    let _ = write!(
-        out,
-        "{{\"key\":\"colour\",\"value\":\"mean grain stress, compression positive, viridis from 0 to {top:.4e}\"}},{{\"key\":\"step\",\"value\":\"{}\"}}",
-        world.step
-    );
+    scene_grains_start(out, log_time, top, world.step);
     out.push_str("],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[");
     // Grains in parallel chunks, joined in order: the same bytes for any thread count.
     const CHUNK: usize = 2048;
@@ -783,12 +792,7 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
                 }
                 let half = 0.5 * (g.theta + g.alpha);
                 let (qz, qw) = half.sin_cos();
-                let t = if top > 0.0 {
-                    (mean_c[id] / top).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let [r, gr, b] = crate::output::render::viridis(t);
+                let [r, gr, b] = stress_colour(mean_c[id], top);
                 let _ = write!(
                     s,
                     "{{\"pose\":{{\"position\":{{\"x\":{:.d$},\"y\":{:.d$},\"z\":0}},\"orientation\":{{\"x\":0,\"y\":0,\"z\":{:.5},\"w\":{:.5}}}}},\"size\":{{\"x\":{:.d$},\"y\":{:.d$},\"z\":{:.d$}}},\"bottom_scale\":1,\"top_scale\":1,\"color\":{{\"r\":{:.3},\"g\":{:.3},\"b\":{:.3},\"a\":1}}}}",
@@ -825,27 +829,69 @@ fn encode_box(out: &mut String, walls: &[Wall], log_time: u64, mean_radius: f64,
         let (y0, y1) = (walls[BOTTOM].point.y, walls[TOP].point.y);
         out.push_str(",{\"timestamp\":");
         json_time(out, log_time);
-        out.push_str(",\"frame_id\":\"sdem\",\"id\":\"box\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[{\"type\":1,\"pose\":{\"position\":{\"x\":0,\"y\":0,\"z\":0},\"orientation\":{\"x\":0,\"y\":0,\"z\":0,\"w\":1}},");
-        let _ = write!(
-            out,
-            "\"thickness\":{:.d$},\"scale_invariant\":false,\"points\":[",
-            0.25 * mean_radius,
-            d = decimals
-        );
-        for (k, (x, y)) in [(x0, y0), (x1, y0), (x1, y1), (x0, y1)].iter().enumerate() {
-            if k > 0 {
-                out.push(',');
-            }
-            let _ = write!(
-                out,
-                "{{\"x\":{:.d$},\"y\":{:.d$},\"z\":0}}",
-                num(*x),
-                num(*y),
-                d = decimals
-            );
-        }
-        out.push_str("],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}],\"triangles\":[],\"texts\":[],\"models\":[]}");
+        out.push_str(",\"frame_id\":\"sdem\",\"id\":\"box\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[");
+        let corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)].map(|(x, y)| DVec2::new(x, y));
+        json_line_loop(out, &corners, 0.25 * mean_radius, decimals);
+        out.push_str("],\"triangles\":[],\"texts\":[],\"models\":[]}");
     }
+}
+
+/// The identity pose of a `/scene` primitive.
+const IDENTITY_POSE: &str = "\"pose\":{\"position\":{\"x\":0,\"y\":0,\"z\":0},\"orientation\":{\"x\":0,\"y\":0,\"z\":0,\"w\":1}}";
+
+/// Starts a `/scene` message: up to the metadata of its `grains` entity (colour scale from 0
+/// to `top`, step), which the caller may extend before it closes them.
+fn scene_grains_start(out: &mut String, log_time: u64, top: f64, step: u64) {
+    out.push_str("{\"deletions\":[],\"entities\":[{\"timestamp\":");
+    json_time(out, log_time);
+    out.push_str(
+        ",\"frame_id\":\"sdem\",\"id\":\"grains\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[",
+    );
+    let _ = write!(
+        out,
+        "{{\"key\":\"colour\",\"value\":\"mean grain stress, compression positive, viridis from 0 to {top:.4e}\"}},{{\"key\":\"step\",\"value\":\"{step}\"}}"
+    );
+}
+
+/// The colour of a grain of mean stress `mean_stress_c` (compression positive): viridis over
+/// `[0, top]` (the low end when `top` is not positive).
+fn stress_colour(mean_stress_c: f64, top: f64) -> [u8; 3] {
+    let t = if top > 0.0 {
+        (mean_stress_c / top).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    crate::output::render::viridis(t)
+}
+
+/// A point of a `/scene` primitive, in the plane z = 0, with `decimals` decimals.
+fn json_point(out: &mut String, p: DVec2, decimals: usize) {
+    let _ = write!(
+        out,
+        "{{\"x\":{:.d$},\"y\":{:.d$},\"z\":0}}",
+        num(p.x),
+        num(p.y),
+        d = decimals
+    );
+}
+
+/// A dark grey line loop through `points`, `thickness` thick, as a `/scene` line primitive.
+fn json_line_loop(out: &mut String, points: &[DVec2], thickness: f64, decimals: usize) {
+    out.push_str("{\"type\":1,");
+    out.push_str(IDENTITY_POSE);
+    let _ = write!(
+        out,
+        ",\"thickness\":{thickness:.decimals$},\"scale_invariant\":false,\"points\":["
+    );
+    for (k, &p) in points.iter().enumerate() {
+        if k > 0 {
+            out.push(',');
+        }
+        json_point(out, p, decimals);
+    }
+    out.push_str(
+        "],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}",
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -917,6 +963,19 @@ enum Bodies {
     Contours { contours: u16 },
 }
 
+/// What the `sdem.run` metadata of a log says of its run beyond the scenario.
+struct RunInfo<'a> {
+    grains: usize,
+    material: &'a Material,
+    /// The grain model, as the `model` entry writes it.
+    model: String,
+    dt: f64,
+    /// The `stress_sign` entry: the sign conventions of the channels.
+    stress_sign: &'static str,
+    /// The entries of one solver.
+    extra: Vec<(&'static str, String)>,
+}
+
 /// `round(time * 1e9)` as u64 (saturating; 0 for negative or non-finite times).
 pub fn time_to_ns(time: f64) -> u64 {
     let ns = (time * 1e9).round();
@@ -949,29 +1008,56 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         world: &World,
     ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
-        let (path, mut inner, handle) = Self::open_file(settings)?;
-        let mcap_err = |error| WriteError::Mcap {
-            path: path.clone(),
-            error,
+        let p = &world.params;
+        let info = RunInfo {
+            grains: world.grains.len(),
+            material: &p.material,
+            model: match &p.adaptive {
+                Some(a) => format!("Adaptive({:?})", a.settings),
+                None => format!("{:?}", p.level),
+            },
+            dt: p.dt,
+            stress_sign: "/grains: tension positive; /macro: compression positive",
+            extra: vec![
+                ("resolution_deg", format!("{}", p.resolution_deg)),
+                ("contour_nodes", world.table.nodes.to_string()),
+            ],
         };
-        let grains = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_GRAINS,
-            SCHEMA_GRAINS,
-            "ros2msg",
-            GRAINS_MSG,
-            "cdr",
-        )?;
-        let contacts = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_CONTACTS,
-            SCHEMA_CONTACTS,
-            "ros2msg",
-            CONTACTS_MSG,
-            "cdr",
-        )?;
+        Self::create_log(settings, scenario, SCENE_SCHEMA, info, |inner, path| {
+            let grains = add_channel(
+                inner,
+                path,
+                TOPIC_GRAINS,
+                SCHEMA_GRAINS,
+                "ros2msg",
+                GRAINS_MSG,
+                "cdr",
+            )?;
+            let contacts = add_channel(
+                inner,
+                path,
+                TOPIC_CONTACTS,
+                SCHEMA_CONTACTS,
+                "ros2msg",
+                CONTACTS_MSG,
+                "cdr",
+            )?;
+            Ok(Bodies::Ellipses { grains, contacts })
+        })
+    }
+
+    /// Creates a log: header, the channels of the bodies (added by `add_bodies`), then
+    /// `/walls`, `/macro` and `/scene` (of schema `scene_schema`), the scenario attachment and
+    /// the `sdem.run` metadata. Also returns the metadata and the scenario attachment.
+    fn create_log(
+        settings: &McapSettings,
+        scenario: &Scenario,
+        scene_schema: &str,
+        info: RunInfo<'_>,
+        add_bodies: impl FnOnce(&mut McapWriter, &str) -> Result<Bodies, WriteError>,
+    ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
+        let (path, mut inner, handle) = Self::open_file(settings)?;
+        let bodies = add_bodies(&mut inner, &path)?;
         let walls = add_channel(
             &mut inner,
             &path,
@@ -996,47 +1082,37 @@ impl TrajectoryWriter {
             TOPIC_SCENE,
             SCHEMA_SCENE,
             "jsonschema",
-            SCENE_SCHEMA,
+            scene_schema,
             "json",
         )?;
         let scenario_text = attach_scenario(&mut inner, &path, scenario)?;
-        let scene_every = settings.scene_interval(world.grains.len());
-        let p = &world.params;
+        let scene_every = settings.scene_interval(info.grains);
+        let m = info.material;
         let run: BTreeMap<String, String> = [
             ("format_version", FORMAT_VERSION.to_string()),
             ("sdem_version", env!("CARGO_PKG_VERSION").to_string()),
             ("scenario", scenario.name.clone()),
-            ("grains", world.grains.len().to_string()),
+            ("grains", info.grains.to_string()),
             ("seed", scenario.seed.to_string()),
-            ("young", format!("{:e}", p.material.young)),
-            ("poisson", format!("{}", p.material.poisson)),
-            ("density", format!("{:e}", p.material.density)),
-            (
-                "model",
-                match &p.adaptive {
-                    Some(a) => format!("Adaptive({:?})", a.settings),
-                    None => format!("{:?}", p.level),
-                },
-            ),
-            ("dt", format!("{:e}", p.dt)),
-            ("resolution_deg", format!("{}", p.resolution_deg)),
-            ("contour_nodes", world.table.nodes.to_string()),
+            ("young", format!("{:e}", m.young)),
+            ("poisson", format!("{}", m.poisson)),
+            ("density", format!("{:e}", m.density)),
+            ("model", info.model),
+            ("dt", format!("{:e}", info.dt)),
             ("output_every", scenario.output.every.to_string()),
             (
                 "jamming_pressure",
-                format!("{:e}", scenario.output.jamming_pressure * p.material.young),
+                format!("{:e}", scenario.output.jamming_pressure * m.young),
             ),
             ("scene_every", scene_every.to_string()),
             (
                 "log_time",
                 "round(simulated time * 1e9) ns, strictly increasing".to_string(),
             ),
-            (
-                "stress_sign",
-                "/grains: tension positive; /macro: compression positive".to_string(),
-            ),
+            ("stress_sign", info.stress_sign.to_string()),
         ]
         .into_iter()
+        .chain(info.extra)
         .map(|(k, v)| (k.to_string(), v))
         .collect();
         inner
@@ -1044,13 +1120,16 @@ impl TrajectoryWriter {
                 name: "sdem.run".into(),
                 metadata: run.clone(),
             })
-            .map_err(mcap_err)?;
+            .map_err(|error| WriteError::Mcap {
+                path: path.clone(),
+                error,
+            })?;
         let writer = Self {
             path,
             inner,
             file: handle,
             replaces: None,
-            bodies: Bodies::Ellipses { grains, contacts },
+            bodies,
             walls,
             macro_row,
             scene,
@@ -1181,14 +1260,36 @@ impl TrajectoryWriter {
         let contacts = active_contacts(world);
         encode_contacts(&mut buf, world, &contacts);
         self.put(contacts_channel, log_time, &buf)?;
-        encode_walls(&mut buf, world.step, world.time, &world.walls);
+        self.finish_frame(
+            buf,
+            log_time,
+            (world.step, world.time),
+            &world.walls,
+            row,
+            |text| encode_scene(text, world, log_time),
+        )
+    }
+
+    /// Ends the frame at `log_time` whose bodies are written: `/walls`, `/macro` and, on its
+    /// interval, `/scene` (encoded by `scene`); `buf` is the message buffer, taken from
+    /// `self.buf`, given back.
+    fn finish_frame(
+        &mut self,
+        mut buf: Vec<u8>,
+        log_time: u64,
+        (step, time): (u64, f64),
+        walls: &[Wall],
+        row: &Measures,
+        scene: impl FnOnce(&mut String),
+    ) -> Result<(), WriteError> {
+        encode_walls(&mut buf, step, time, walls);
         self.put(self.walls, log_time, &buf)?;
         encode_macro(&mut buf, row);
         self.put(self.macro_row, log_time, &buf)?;
         self.buf = buf;
         if self.scene_every > 0 && self.frames % self.scene_every == 0 {
             let mut text = std::mem::take(&mut self.text);
-            encode_scene(&mut text, world, log_time);
+            scene(&mut text);
             self.put(self.scene, log_time, text.as_bytes())?;
             self.text = text;
         }

@@ -559,10 +559,7 @@ impl Checkpoint {
 
     /// The file's bytes (format version [`SDEM_FORMAT_VERSION`]).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let payload = ron::Options::default()
-            .to_string(&self.to_stored())
-            .expect("a checkpoint is always serializable");
-        framed(SDEM_FORMAT_VERSION, payload.into_bytes())
+        encode(SDEM_FORMAT_VERSION, &self.to_stored())
     }
 
     /// Decodes a file's bytes; `path` only names the file in errors. Never panics. A meshfree
@@ -570,11 +567,7 @@ impl Checkpoint {
     pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
         match AnyCheckpoint::from_bytes(bytes, path)? {
             AnyCheckpoint::Sdem(c) => Ok(*c),
-            AnyCheckpoint::Meshfree(_) => Err(CheckpointError::OtherSolver {
-                path: path.to_string(),
-                found: "meshfree",
-                expected: "SDEM",
-            }),
+            other => Err(other.other_solver(path, "SDEM")),
         }
     }
 
@@ -588,12 +581,7 @@ impl Checkpoint {
     }
 
     pub fn read(path: &Path) -> Result<Self, CheckpointError> {
-        let name = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, &name)
+        read_file(path, Self::from_bytes)
     }
 
     /// Writes atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the directory.
@@ -641,12 +629,20 @@ impl AnyCheckpoint {
     }
 
     pub fn read(path: &Path) -> Result<Self, CheckpointError> {
-        let name = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, &name)
+        read_file(path, Self::from_bytes)
+    }
+
+    /// The error of a file that holds this checkpoint where one of solver `expected` was
+    /// wanted.
+    pub(crate) fn other_solver(&self, path: &str, expected: &'static str) -> CheckpointError {
+        CheckpointError::OtherSolver {
+            path: path.to_string(),
+            found: match self {
+                AnyCheckpoint::Sdem(_) => "SDEM",
+                AnyCheckpoint::Meshfree(_) => "meshfree",
+            },
+            expected,
+        }
     }
 
     /// The run's scenario.
@@ -693,8 +689,30 @@ fn payload_text<'p>(payload: &'p [u8], path: &str) -> Result<&'p str, Checkpoint
     std::str::from_utf8(payload).map_err(|e| corrupt(path, format!("not UTF-8: {e}")))
 }
 
+/// Reads the file at `path` and decodes its bytes with `decode` (a `from_bytes`, told the
+/// path for its errors).
+pub(crate) fn read_file<T>(
+    path: &Path,
+    decode: impl FnOnce(&[u8], &str) -> Result<T, CheckpointError>,
+) -> Result<T, CheckpointError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
+        path: name.clone(),
+        source,
+    })?;
+    decode(&bytes, &name)
+}
+
+/// The bytes of a file of format `version` whose payload is `stored` in RON.
+pub(crate) fn encode(version: u32, stored: &impl Serialize) -> Vec<u8> {
+    let payload = ron::Options::default()
+        .to_string(stored)
+        .expect("a checkpoint is always serializable");
+    framed(version, payload.into_bytes())
+}
+
 /// Header and payload: the bytes of a file.
-pub(crate) fn framed(version: u32, payload: Vec<u8>) -> Vec<u8> {
+fn framed(version: u32, payload: Vec<u8>) -> Vec<u8> {
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&version.to_le_bytes());

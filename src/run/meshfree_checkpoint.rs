@@ -16,7 +16,7 @@
 
 use super::checkpoint::{
     AnyCheckpoint, Bits, CheckpointError, FORMAT_VERSION, GrainBits, JammingBits, Payload,
-    ProgramBits, WallBits, framed, write_atomic,
+    ProgramBits, WallBits, encode, read_file, write_atomic,
 };
 use super::meshfree::Meshfree;
 use super::simulation::{RunRecord, Simulation};
@@ -480,31 +480,22 @@ impl MeshfreeCheckpoint {
 
     /// The file's bytes (format version [`FORMAT_VERSION`], payload `Meshfree((...))`).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let payload = ron::Options::default()
-            .to_string(&Payload::Meshfree(Box::new(self.to_stored())))
-            .expect("a checkpoint is always serializable");
-        framed(FORMAT_VERSION, payload.into_bytes())
+        encode(
+            FORMAT_VERSION,
+            &Payload::Meshfree(Box::new(self.to_stored())),
+        )
     }
 
     /// Decodes a file's bytes; refuses an SDEM checkpoint. Never panics.
     pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Self, CheckpointError> {
         match AnyCheckpoint::from_bytes(bytes, path)? {
             AnyCheckpoint::Meshfree(c) => Ok(*c),
-            AnyCheckpoint::Sdem(_) => Err(CheckpointError::OtherSolver {
-                path: path.to_string(),
-                found: "SDEM",
-                expected: "meshfree",
-            }),
+            other => Err(other.other_solver(path, "meshfree")),
         }
     }
 
     pub fn read(path: &Path) -> Result<Self, CheckpointError> {
-        let name = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, &name)
+        read_file(path, Self::from_bytes)
     }
 
     /// Writes atomically (see [`super::checkpoint::Checkpoint::write_atomic`]).

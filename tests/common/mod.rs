@@ -1,5 +1,8 @@
-//! Scaffolding shared by the integration tests that run, stop and resume small compactions.
+//! Scaffolding shared by the integration tests that run, stop and resume small compactions;
+//! [`meshfree`]: the stacked-disc column of the multibody meshfree tests.
 #![allow(dead_code)] // each test binary uses its own subset
+
+pub mod meshfree;
 
 use sdem::grain::Grain;
 use sdem::run::checkpoint::Checkpoint;

@@ -10,17 +10,14 @@
 //! centroid filled with the colour of its mean stress, outlined by a line loop.
 
 use super::{
-    Bodies, CdrReader, CdrResult, CdrWriter, FORMAT_VERSION, MACRO_MSG, McapSettings, SCHEMA_MACRO,
-    SCHEMA_SCENE, SCHEMA_WALLS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, TrajectoryWriter, WALLS_MSG,
-    WriteError, add_channel, attach_scenario, encode_box, encode_macro, encode_walls, json_time,
-    length_decimals, num, stress_colour_max,
+    Bodies, CdrReader, CdrResult, CdrWriter, IDENTITY_POSE, McapSettings, RunInfo,
+    TrajectoryWriter, WriteError, add_channel, encode_box, json_line_loop, json_point,
+    length_decimals, scene_grains_start, scene_schema, stress_colour, stress_colour_max,
 };
 use crate::boundary::walls::Wall;
 use crate::output::measures::Measures;
 use crate::scenario::Scenario;
 use glam::DVec2;
-use mcap::records;
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 pub const TOPIC_CONTOURS: &str = "/contours";
@@ -45,37 +42,12 @@ float64[] y
 
 /// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that `/scene` of a meshfree
 /// log uses (entities made of triangle lists and lines).
-pub const CONTOUR_SCENE_SCHEMA: &str = r##"{
-  "title": "foxglove.SceneUpdate",
-  "description": "An update to the entities displayed in a 3D scene (subset written by sdem for meshfree grains: triangles and lines)",
-  "type": "object",
-  "$defs": {
-    "time": {"type": "object", "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}},
-    "vector3": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}}},
-    "quaternion": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}},
-    "pose": {"type": "object", "properties": {"position": {"$ref": "#/$defs/vector3"}, "orientation": {"$ref": "#/$defs/quaternion"}}},
-    "color": {"type": "object", "properties": {"r": {"type": "number"}, "g": {"type": "number"}, "b": {"type": "number"}, "a": {"type": "number"}}},
-    "cylinder": {"title": "foxglove.CylinderPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "size": {"$ref": "#/$defs/vector3"}, "bottom_scale": {"type": "number"}, "top_scale": {"type": "number"}, "color": {"$ref": "#/$defs/color"}}},
-    "triangles": {"title": "foxglove.TriangleListPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}},
-    "line": {"title": "foxglove.LinePrimitive", "type": "object", "properties": {"type": {"type": "integer"}, "pose": {"$ref": "#/$defs/pose"}, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}}
-  },
-  "properties": {
-    "deletions": {"type": "array", "items": {"type": "object"}},
-    "entities": {"type": "array", "items": {"title": "foxglove.SceneEntity", "type": "object", "properties": {
-      "timestamp": {"$ref": "#/$defs/time"},
-      "frame_id": {"type": "string"},
-      "id": {"type": "string"},
-      "lifetime": {"$ref": "#/$defs/time"},
-      "frame_locked": {"type": "boolean"},
-      "metadata": {"type": "array", "items": {"type": "object", "properties": {"key": {"type": "string"}, "value": {"type": "string"}}}},
-      "arrows": {"type": "array"}, "cubes": {"type": "array"}, "spheres": {"type": "array"},
-      "cylinders": {"type": "array", "items": {"$ref": "#/$defs/cylinder"}},
-      "lines": {"type": "array", "items": {"$ref": "#/$defs/line"}},
-      "triangles": {"type": "array", "items": {"$ref": "#/$defs/triangles"}}, "texts": {"type": "array"}, "models": {"type": "array"}
-    }}}
-  }
-}
-"##;
+pub const CONTOUR_SCENE_SCHEMA: &str = scene_schema!(
+    " for meshfree grains: triangles and lines",
+    r##"    "triangles": {"title": "foxglove.TriangleListPrimitive", "type": "object", "properties": {"pose": {"$ref": "#/$defs/pose"}, "points": {"type": "array", "items": {"$ref": "#/$defs/vector3"}}, "color": {"$ref": "#/$defs/color"}, "colors": {"type": "array", "items": {"$ref": "#/$defs/color"}}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}}},
+"##,
+    r##"{"type": "array", "items": {"$ref": "#/$defs/triangles"}}"##
+);
 
 /// One meshfree grain as logged: its deformed contour and mean stress.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -199,49 +171,16 @@ pub(super) fn encode_contour_scene(
     let decimals = length_decimals(radii.iter().copied().fold(f64::INFINITY, f64::min));
     let means: Vec<f64> = contours.iter().map(|c| c.mean_stress_c).collect();
     let top = stress_colour_max(&means);
-    let identity = "\"pose\":{\"position\":{\"x\":0,\"y\":0,\"z\":0},\"orientation\":{\"x\":0,\"y\":0,\"z\":0,\"w\":1}}";
-    let point = |s: &mut String, p: DVec2| {
-        let _ = write!(
-            s,
-            "{{\"x\":{:.d$},\"y\":{:.d$},\"z\":0}}",
-            num(p.x),
-            num(p.y),
-            d = decimals
-        );
-    };
 
-    out.push_str("{\"deletions\":[],\"entities\":[{\"timestamp\":");
-    json_time(out, log_time);
-    out.push_str(
-        ",\"frame_id\":\"sdem\",\"id\":\"grains\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[",
-    );
-    let _ = write!(
-        out,
-        "{{\"key\":\"colour\",\"value\":\"mean grain stress, compression positive, viridis from 0 to {top:.4e}\"}},{{\"key\":\"step\",\"value\":\"{step}\"}},{{\"key\":\"solver\",\"value\":\"meshfree\"}}"
-    );
+    scene_grains_start(out, log_time, top, step);
+    out.push_str(",{\"key\":\"solver\",\"value\":\"meshfree\"}");
     out.push_str("],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[");
     // Outlines: a line loop per grain.
     for (k, c) in contours.iter().enumerate() {
         if k > 0 {
             out.push(',');
         }
-        out.push_str("{\"type\":1,");
-        out.push_str(identity);
-        let _ = write!(
-            out,
-            ",\"thickness\":{:.d$},\"scale_invariant\":false,\"points\":[",
-            0.03 * mean_radius,
-            d = decimals
-        );
-        for (i, &p) in c.points.iter().enumerate() {
-            if i > 0 {
-                out.push(',');
-            }
-            point(out, p);
-        }
-        out.push_str(
-            "],\"color\":{\"r\":0.1,\"g\":0.1,\"b\":0.1,\"a\":1},\"colors\":[],\"indices\":[]}",
-        );
+        json_line_loop(out, &c.points, 0.03 * mean_radius, decimals);
     }
     out.push_str("],\"triangles\":[");
     // Fills: a fan from the area centroid (point 0) over the contour's edges.
@@ -249,19 +188,14 @@ pub(super) fn encode_contour_scene(
         if k > 0 {
             out.push(',');
         }
-        let t = if top > 0.0 {
-            (c.mean_stress_c / top).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let [r, g, b] = crate::output::render::viridis(t);
+        let [r, g, b] = stress_colour(c.mean_stress_c, top);
         out.push('{');
-        out.push_str(identity);
+        out.push_str(IDENTITY_POSE);
         out.push_str(",\"points\":[");
-        point(out, c.area_centroid().1);
+        json_point(out, c.area_centroid().1, decimals);
         for &p in &c.points {
             out.push(',');
-            point(out, p);
+            json_point(out, p, decimals);
         }
         let _ = write!(
             out,
@@ -293,104 +227,37 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         info: &ContourLogInfo,
     ) -> Result<Self, WriteError> {
-        let (path, mut inner, handle) = Self::open_file(settings)?;
-        let contours = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_CONTOURS,
-            SCHEMA_CONTOURS,
-            "ros2msg",
-            CONTOURS_MSG,
-            "cdr",
-        )?;
-        let walls = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_WALLS,
-            SCHEMA_WALLS,
-            "ros2msg",
-            WALLS_MSG,
-            "cdr",
-        )?;
-        let macro_row = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_MACRO,
-            SCHEMA_MACRO,
-            "ros2msg",
-            MACRO_MSG,
-            "cdr",
-        )?;
-        let scene = add_channel(
-            &mut inner,
-            &path,
-            TOPIC_SCENE,
-            SCHEMA_SCENE,
-            "jsonschema",
+        let info = RunInfo {
+            grains: info.grains,
+            material: &scenario.material,
+            model: format!("{:?}", scenario.model),
+            dt: info.dt,
+            stress_sign: "/contours: stress_* tension positive, mean_stress_c compression positive; \
+                 /macro: compression positive",
+            extra: vec![
+                ("solver", "meshfree".to_string()),
+                ("boundary_nodes", info.boundary_nodes.to_string()),
+            ],
+        };
+        let (writer, _, _) = Self::create_log(
+            settings,
+            scenario,
             CONTOUR_SCENE_SCHEMA,
-            "json",
+            info,
+            |inner, path| {
+                let contours = add_channel(
+                    inner,
+                    path,
+                    TOPIC_CONTOURS,
+                    SCHEMA_CONTOURS,
+                    "ros2msg",
+                    CONTOURS_MSG,
+                    "cdr",
+                )?;
+                Ok(Bodies::Contours { contours })
+            },
         )?;
-        attach_scenario(&mut inner, &path, scenario)?;
-        let scene_every = settings.scene_interval(info.grains);
-        let m = &scenario.material;
-        let run: BTreeMap<String, String> = [
-            ("format_version", FORMAT_VERSION.to_string()),
-            ("sdem_version", env!("CARGO_PKG_VERSION").to_string()),
-            ("solver", "meshfree".to_string()),
-            ("scenario", scenario.name.clone()),
-            ("grains", info.grains.to_string()),
-            ("seed", scenario.seed.to_string()),
-            ("young", format!("{:e}", m.young)),
-            ("poisson", format!("{}", m.poisson)),
-            ("density", format!("{:e}", m.density)),
-            ("model", format!("{:?}", scenario.model)),
-            ("dt", format!("{:e}", info.dt)),
-            ("boundary_nodes", info.boundary_nodes.to_string()),
-            ("output_every", scenario.output.every.to_string()),
-            (
-                "jamming_pressure",
-                format!("{:e}", scenario.output.jamming_pressure * m.young),
-            ),
-            ("scene_every", scene_every.to_string()),
-            (
-                "log_time",
-                "round(simulated time * 1e9) ns, strictly increasing".to_string(),
-            ),
-            (
-                "stress_sign",
-                "/contours: stress_* tension positive, mean_stress_c compression positive; \
-                 /macro: compression positive"
-                    .to_string(),
-            ),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect();
-        inner
-            .write_metadata(&records::Metadata {
-                name: "sdem.run".into(),
-                metadata: run,
-            })
-            .map_err(|error| WriteError::Mcap {
-                path: path.clone(),
-                error,
-            })?;
-        Ok(Self {
-            path,
-            inner,
-            file: handle,
-            replaces: None,
-            bodies: Bodies::Contours { contours },
-            walls,
-            macro_row,
-            scene,
-            scene_every,
-            sequence: 0,
-            last_log_time: None,
-            frames: 0,
-            buf: Vec::new(),
-            text: String::new(),
-        })
+        Ok(writer)
     }
 
     /// Logs a meshfree state: its grains' contours, the walls and the `macro.csv` row, at
@@ -412,19 +279,9 @@ impl TrajectoryWriter {
         let mut buf = std::mem::take(&mut self.buf);
         encode_contours(&mut buf, step, time, contours);
         self.put(channel, log_time, &buf)?;
-        encode_walls(&mut buf, step, time, walls);
-        self.put(self.walls, log_time, &buf)?;
-        encode_macro(&mut buf, row);
-        self.put(self.macro_row, log_time, &buf)?;
-        self.buf = buf;
-        if self.scene_every > 0 && self.frames % self.scene_every == 0 {
-            let mut text = std::mem::take(&mut self.text);
-            encode_contour_scene(&mut text, step, contours, walls, log_time);
-            self.put(self.scene, log_time, text.as_bytes())?;
-            self.text = text;
-        }
-        self.frames += 1;
-        Ok(())
+        self.finish_frame(buf, log_time, (step, time), walls, row, |text| {
+            encode_contour_scene(text, step, contours, walls, log_time)
+        })
     }
 }
 
