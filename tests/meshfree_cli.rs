@@ -122,12 +122,11 @@ fn a_small_meshfree_run_writes_its_outputs() {
 
 #[test]
 fn incompressible_grains_are_refused() {
-    let e = failing(
-        "nu05",
-        &replaced("poisson: 0.3", "poisson: 0.5"),
-        &[],
+    let e = failing("nu05", &replaced("poisson: 0.3", "poisson: 0.5"), &[]);
+    assert!(
+        e.contains("material.poisson") && e.contains("below 0.5"),
+        "{e}"
     );
-    assert!(e.contains("material.poisson") && e.contains("below 0.5"), "{e}");
 }
 
 #[test]
@@ -147,7 +146,10 @@ fn too_few_nodes_for_the_supports_is_refused() {
         &replaced("boundary_nodes: 16", "boundary_nodes: 8"),
         &[],
     );
-    assert!(e.contains("too coarse") && e.contains("20 neighbours"), "{e}");
+    assert!(
+        e.contains("too coarse") && e.contains("20 neighbours"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -158,7 +160,10 @@ fn gravity_with_an_sdem_model_is_refused() {
             "model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0, gap_tolerance: 1e-4)),",
             "model: Full,\n    gravity: (0.0, -1.0),",
         )
-        .replace("time_step: Fixed(0.02)", "time_step: FractionOfCritical(0.4)"),
+        .replace(
+            "time_step: Fixed(0.02)",
+            "time_step: FractionOfCritical(0.4)",
+        ),
         &[],
     );
     assert!(e.contains("gravity") && e.contains("meshfree"), "{e}");
@@ -266,7 +271,10 @@ fn non_convergence_stops_with_a_diagnostic_and_the_last_good_state() {
     let out = run(&path, &out_dir);
     let e = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{e}");
-    assert!(e.contains("converge") && e.contains("last good state"), "{e}");
+    assert!(
+        e.contains("converge") && e.contains("last good state"),
+        "{e}"
+    );
     let last_good = std::fs::read_to_string(out_dir.join("grains_last_good.csv")).unwrap();
     assert_eq!(last_good.lines().count(), 5);
     let macro_csv = std::fs::read_to_string(out_dir.join("macro.csv")).unwrap();

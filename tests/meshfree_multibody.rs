@@ -17,7 +17,11 @@ fn symmetry_error(boundary_nodes: usize, nu: f64, approach: f64, steps: usize) -
         "nb {boundary_nodes} nu {nu}: one disc {:?}\n two discs {:?}",
         one.force, two.force
     );
-    assert!(two.momentum < 1e-10, "momentum imbalance {:e}", two.momentum);
+    assert!(
+        two.momentum < 1e-10,
+        "momentum imbalance {:e}",
+        two.momentum
+    );
     assert!(
         two.penetration <= settings().gap_tolerance,
         "penetration {:e}",
@@ -89,12 +93,17 @@ fn biaxial_100_runs_its_three_phases() {
     println!("two_disc_force_rel_err = {worst:e}");
     assert!(worst < 0.01, "{worst}");
 
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenarios/meshfree_biaxial_100.ron");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/meshfree_biaxial_100.ron");
     let out = std::env::temp_dir().join(format!("sdem-biaxial-100-{}", std::process::id()));
     let started = std::time::Instant::now();
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .args(["run", path.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .status()
         .unwrap();
     let seconds = started.elapsed().as_secs_f64();

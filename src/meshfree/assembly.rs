@@ -126,7 +126,10 @@ impl Evaluation {
 
     /// Largest |g| over active elements (the augmentation loop's stop test).
     pub fn max_abs_gap(&self) -> f64 {
-        self.elements.iter().map(|e| e.gap.abs()).fold(0.0, f64::max)
+        self.elements
+            .iter()
+            .map(|e| e.gap.abs())
+            .fold(0.0, f64::max)
     }
 
     /// Total force of the grains on wall `w` (a vector: minus the sum of the wall elements'
@@ -237,7 +240,9 @@ impl ContactPattern {
     /// after adding the pairs it lacks. Blocks `[K_xx, K_yx, K_xy, K_yy]`.
     fn gather(&mut self, elements: &[ContactElement]) -> Vec<[f64; 4]> {
         let mut missing = Vec::new();
-        fn node_pairs(e: &ContactElement) -> impl Iterator<Item = (usize, usize, (usize, usize))> + '_ {
+        fn node_pairs(
+            e: &ContactElement,
+        ) -> impl Iterator<Item = (usize, usize, (usize, usize))> + '_ {
             let nodes = e.dofs.len() / 2;
             let d = &e.dofs;
             (0..nodes).flat_map(move |p| (0..nodes).map(move |q| (p, q, (d[2 * p], d[2 * q]))))
@@ -253,7 +258,12 @@ impl ContactPattern {
             self.pairs.extend(missing);
             self.pairs.sort_unstable();
             self.pairs.dedup();
-            self.slot = self.pairs.iter().enumerate().map(|(k, &p)| (p, k)).collect();
+            self.slot = self
+                .pairs
+                .iter()
+                .enumerate()
+                .map(|(k, &p)| (p, k))
+                .collect();
         }
         let mut values = vec![[0.0; 4]; self.pairs.len()];
         for e in elements {
@@ -301,7 +311,14 @@ fn bounding_box(points: &[[f64; 2]]) -> [f64; 4] {
             f64::NEG_INFINITY,
             f64::NEG_INFINITY,
         ],
-        |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])],
+        |b, p| {
+            [
+                b[0].min(p[0]),
+                b[1].min(p[1]),
+                b[2].max(p[0]),
+                b[3].max(p[1]),
+            ]
+        },
     )
 }
 
@@ -321,10 +338,7 @@ impl Assembly {
         for g in &grains {
             offsets.push(offsets.last().unwrap() + g.dofs());
         }
-        let external = grains
-            .iter()
-            .flat_map(|g| g.body_force(gravity))
-            .collect();
+        let external = grains.iter().flat_map(|g| g.body_force(gravity)).collect();
         let initial_stiffness = if rayleigh.1 != 0.0 {
             grains
                 .par_iter()
@@ -544,9 +558,7 @@ impl Assembly {
                     let acc: Vec<f64> = range
                         .clone()
                         .map(|i| {
-                            dt.c_m * u[i]
-                                + dt.a_const[i]
-                                + alpha * (dt.c_v * u[i] + dt.v_const[i])
+                            dt.c_m * u[i] + dt.a_const[i] + alpha * (dt.c_v * u[i] + dt.v_const[i])
                         })
                         .collect();
                     let mut inertia = vec![0.0; model.dofs()];
@@ -601,14 +613,7 @@ impl Assembly {
         let elements: Vec<ContactElement> = (0..self.grains.len())
             .into_par_iter()
             .map(|i| {
-                self.slave_elements(
-                    i,
-                    &contours,
-                    &neighbours[i],
-                    multipliers,
-                    k,
-                    with_tangent,
-                )
+                self.slave_elements(i, &contours, &neighbours[i], multipliers, k, with_tangent)
             })
             .collect::<Vec<_>>()
             .into_iter()
@@ -713,10 +718,7 @@ impl Assembly {
             newton_update(u, &du, |trial| self.all_points_valid(trial))?;
             eval = self.evaluate(u, multipliers, k, dynamic, false)?;
         }
-        let norm = eval
-            .residual
-            .iter()
-            .fold(0.0f64, |s, v| s.max(v.abs()));
+        let norm = eval.residual.iter().fold(0.0f64, |s, v| s.max(v.abs()));
         if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
             return Ok(eval);
         }
@@ -854,7 +856,13 @@ impl Assembly {
         match self.try_step(state, dt, scheme) {
             Ok((eval, solve)) => {
                 self.move_walls(&walls0, dt);
-                Ok((eval, StepStats { solve, sub_steps: 1 }))
+                Ok((
+                    eval,
+                    StepStats {
+                        solve,
+                        sub_steps: 1,
+                    },
+                ))
             }
             Err(e @ (MeshfreeError::NotConverged(_) | MeshfreeError::Singular))
                 if fraction * 0.5 >= self.min_sub_step =>

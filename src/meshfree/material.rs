@@ -10,7 +10,9 @@
 use super::MeshfreeError;
 
 /// Which hyperelastic law a meshfree grain follows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
 pub enum HyperelasticLaw {
     /// `W = mu/2 (tr C + 1 - 3) - mu ln J + lambda/2 (ln J)^2` (the default; `nu < 0.5`).
     #[default]

@@ -27,7 +27,8 @@ pub mod solver;
 pub mod sparse;
 
 pub use contact::{
-    Multipliers, Wall, WallNodeElement, WallState, add_wall_contacts, contact_length, wall_node_element,
+    Multipliers, Wall, WallNodeElement, WallState, add_wall_contacts, contact_length,
+    wall_node_element,
 };
 pub use discretization::{DiscNodes, GaussPoint, IntegrationMesh, NodeDensity};
 pub use material::{Hyperelastic, HyperelasticLaw, StressResponse};

@@ -282,9 +282,7 @@ impl Meshfree {
 
     fn grain_areas(&self, u: &[f64]) -> Vec<(f64, [f64; 2])> {
         (0..self.assembly.grains.len())
-            .map(|g| {
-                self.assembly.grains[g].contour_area_centroid(self.assembly.grain_slice(u, g))
-            })
+            .map(|g| self.assembly.grains[g].contour_area_centroid(self.assembly.grain_slice(u, g)))
             .collect()
     }
 
