@@ -153,31 +153,8 @@ impl IntegrationMesh {
             t.sort_unstable();
         }
         triangles.sort_unstable();
-        let mut gauss_points = Vec::with_capacity(6 * triangles.len());
-        let mut area = 0.0;
-        for t in &triangles {
-            let [a, b, c] = t.map(|i| positions[i]);
-            let tri_area =
-                0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])).abs();
-            if tri_area <= 1e-14 * (1.0 + area) {
-                continue; // sliver from cocircular nodes on the hull: contributes nothing
-            }
-            area += tri_area;
-            for (bary, w) in GAUSS6 {
-                gauss_points.push(GaussPoint {
-                    position: [
-                        bary[0] * a[0] + bary[1] * b[0] + bary[2] * c[0],
-                        bary[0] * a[1] + bary[1] * b[1] + bary[2] * c[1],
-                    ],
-                    weight: w * tri_area,
-                });
-            }
-        }
-        Ok(Self {
-            triangles,
-            gauss_points,
-            area,
-        })
+        // Slivers from cocircular nodes on the hull have zero area: skipped.
+        Ok(Self::with_gauss_points(positions, triangles))
     }
 }
 

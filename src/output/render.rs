@@ -350,26 +350,38 @@ fn draw_contours<DB: DrawingBackend>(
         if c.points.len() < 3 || !c.points.iter().all(|p| p.is_finite()) {
             continue;
         }
-        let mut polygon = c.points.clone();
-        for &(point, normal) in &cuts {
-            if polygon.len() < 3 {
-                break;
-            }
-            polygon = clip_half_plane(&polygon, point, normal);
-        }
-        if polygon.len() < 3 {
-            continue;
-        }
         let r_px = c.equivalent_radius() * layout.scale;
-        draw_polygon(
-            root,
-            &polygon,
-            stress_colour(means[k], layout),
-            r_px >= 4.0,
-            layout,
-        )?;
+        draw_clipped(root, c.points.clone(), &cuts, means[k], r_px >= 4.0, layout)?;
     }
     Ok(())
+}
+
+/// Clips a grain's outline by half planes (walls, the view's edges) and draws it in its stress
+/// colour, outlined when large enough for the outline to show.
+fn draw_clipped<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    mut polygon: Vec<DVec2>,
+    cuts: &[(DVec2, DVec2)],
+    mean_stress: f64,
+    outlined: bool,
+    layout: &Layout,
+) -> Result<(), String> {
+    for &(point, normal) in cuts {
+        if polygon.len() < 3 {
+            break;
+        }
+        polygon = clip_half_plane(&polygon, point, normal);
+    }
+    if polygon.len() < 3 {
+        return Ok(());
+    }
+    draw_polygon(
+        root,
+        &polygon,
+        stress_colour(mean_stress, layout),
+        outlined,
+        layout,
+    )
 }
 
 /// SDEM grains: ellipses cut along their contact chords and by the walls and the view.
@@ -390,23 +402,8 @@ fn draw_ellipses<DB: DrawingBackend>(
         }
         // Contour nodes: about one per 2 pixels of perimeter, at most 360.
         let nodes = (std::f64::consts::PI * r_px).clamp(12.0, 360.0) as usize;
-        let mut polygon = grain_outline(g, nodes, &cuts[k]);
-        for &(point, normal) in &view {
-            if polygon.len() < 3 {
-                break;
-            }
-            polygon = clip_half_plane(&polygon, point, normal);
-        }
-        if polygon.len() < 3 {
-            continue;
-        }
-        draw_polygon(
-            root,
-            &polygon,
-            stress_colour(means[k], layout),
-            r_px >= 4.0,
-            layout,
-        )?;
+        let polygon = grain_outline(g, nodes, &cuts[k]);
+        draw_clipped(root, polygon, &view, means[k], r_px >= 4.0, layout)?;
     }
     Ok(())
 }
