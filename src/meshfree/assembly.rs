@@ -778,7 +778,8 @@ impl Assembly {
         }
     }
 
-    /// One step of `dt` (walls moving at their velocities), without sub-steps.
+    /// One step of `dt` (walls moving at their velocities), without sub-steps. `state` is
+    /// written only on success; the walls are left where the failed solve had moved them.
     fn try_step(
         &mut self,
         state: &mut AssemblyState,
@@ -851,25 +852,19 @@ impl Assembly {
         fraction: f64,
         scheme: TimeScheme,
     ) -> Result<(Evaluation, StepStats), MeshfreeError> {
-        let saved = (state.clone(), self.walls.clone());
         let walls0 = self.walls.clone();
         match self.try_step(state, dt, scheme) {
-            Ok((eval, solve)) => {
-                self.move_walls(&walls0, dt);
-                Ok((
-                    eval,
-                    StepStats {
-                        solve,
-                        sub_steps: 1,
-                    },
-                ))
-            }
-            Err(e @ (MeshfreeError::NotConverged(_) | MeshfreeError::Singular))
+            Ok((eval, solve)) => Ok((
+                eval,
+                StepStats {
+                    solve,
+                    sub_steps: 1,
+                },
+            )),
+            Err(MeshfreeError::NotConverged(_) | MeshfreeError::Singular)
                 if fraction * 0.5 >= self.min_sub_step =>
             {
-                let _ = e;
-                *state = saved.0;
-                self.walls = saved.1;
+                self.walls = walls0;
                 let (_, mut first) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
                 let (eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
                 first.solve += second.solve;

@@ -232,6 +232,21 @@ impl SampleSettings {
         Ok(())
     }
 
+    /// `count`, when given, must be the number of grains `n` read from `path`.
+    fn check_count(&self, n: usize, path: &Path) -> Result<(), ScenarioError> {
+        match self.count {
+            Some(count) if count != n => Err(invalid(
+                "sample.count",
+                count,
+                &format!(
+                    "the number of grains in {} ({n}), or left out",
+                    path.display()
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+
     fn validate(&self) -> Result<(), ScenarioError> {
         self.validate_fields()?;
         if self.file.is_some() && matches!(self.shapes, Some(GrainShapes::File(_))) {
@@ -250,18 +265,7 @@ impl SampleSettings {
                 ));
             };
             let n = loaded.grains.len();
-            if let Some(count) = self.count
-                && count != n
-            {
-                return Err(invalid(
-                    "sample.count",
-                    count,
-                    &format!(
-                        "the number of grains in {} ({n}), or left out",
-                        loaded.path.display()
-                    ),
-                ));
-            }
+            self.check_count(n, &loaded.path)?;
             let b = self.bounds();
             for (k, (c, shape)) in loaded.grains.iter().enumerate() {
                 let r = shape.max_radius();
@@ -301,18 +305,7 @@ impl SampleSettings {
             }
             .into());
         }
-        if let Some(count) = self.count
-            && count != n
-        {
-            return Err(invalid(
-                "sample.count",
-                count,
-                &format!(
-                    "the number of grains in {} ({n}), or left out",
-                    loaded.path.display()
-                ),
-            ));
-        }
+        self.check_count(n, &loaded.path)?;
         Ok(())
     }
 }
