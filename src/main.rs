@@ -271,7 +271,11 @@ fn run(cli: Cli) -> Result<()> {
             let pool = thread_pool(threads)?;
             let step_note = match parsed.model {
                 sdem::scenario::Model::Meshfree(m) => {
-                    format!("implicit meshfree, {:?} scheme", m.scheme)
+                    let kind = match m.scheme {
+                        sdem::meshfree::TimeScheme::CentralDifference => "explicit",
+                        _ => "implicit",
+                    };
+                    format!("{kind} meshfree, {:?} scheme", m.scheme)
                 }
                 _ => format!(
                     "{:.2} x critical",
@@ -420,11 +424,20 @@ fn run(cli: Cli) -> Result<()> {
                 None => println!("sample: {} generated grains", parsed.sample.grain_count()),
             }
             if let sdem::scenario::Model::Meshfree(m) = parsed.model {
+                let built = sdem::run::meshfree::Meshfree::new(&parsed)?;
+                let step_note = match built.assembly.explicit_data() {
+                    Some(x) => format!(
+                        "explicit: critical step {:.4e}, sub-steps of at most {:.4e}, {} per step",
+                        x.critical_step,
+                        x.sub_step(),
+                        (parsed.time_step_value() / x.sub_step()).ceil()
+                    ),
+                    None => "implicit: no critical step".to_string(),
+                };
                 println!(
-                    "model: meshfree, {} boundary nodes per grain, {:?} law, {:?} scheme (implicit: no critical step)",
+                    "model: meshfree, {} boundary nodes per grain, {:?} law, {:?} scheme ({step_note})",
                     m.boundary_nodes, m.law, m.scheme
                 );
-                let built = sdem::run::meshfree::Meshfree::new(&parsed)?;
                 let grains = &built.assembly.grains;
                 let nodes: usize = grains.iter().map(|g| g.node_count()).sum();
                 let gauss: usize = grains.iter().map(|g| g.gauss_count()).sum();

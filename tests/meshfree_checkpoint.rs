@@ -17,31 +17,11 @@ use std::process::Command;
 mod common;
 use common::with_threads;
 
-/// 4 coarse discs (16 boundary nodes): an isotropic compression with the walls against the
-/// grains from the first step, then a servo phase (its wall velocities come from the wall
-/// stresses of the step before, so the contact elements of the last step must be restored
-/// exactly), the first grain-grain contacts near its end. About 0.1 s a step.
-const SCENARIO: &str = r#"
-Scenario(
-    name: "mf_ckpt",
-    seed: 3,
-    sample: (count: 4, box_width: 0.34, box_height: 0.34,
-             radii: Uniform(min: 0.06, max: 0.07)),
-    material: (young: 1.0, poisson: 0.3, density: 1.0),
-    model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0)),
-    time_step: Fixed(0.01),
-    loading: [
-        Isotropic(rate: Constant(2.0), until: PackingFraction(0.6)),
-        Servo(sxx: 0.1, syy: 0.1, gain: 0.5, max_rate: 2.0, until: Steps(100)),
-    ],
-    output: (every: 2, max_steps: 16),
-)
-"#;
+/// The run stopped and resumed: [`common::MESHFREE_FOUR`].
+use common::MESHFREE_FOUR as SCENARIO;
 
 fn scenario() -> Scenario {
-    let s = Scenario::parse(SCENARIO, "mf_ckpt.ron").unwrap();
-    s.validate().unwrap();
-    s
+    common::meshfree_four()
 }
 
 fn temp_dir(name: &str) -> PathBuf {

@@ -103,6 +103,7 @@ fn a_small_meshfree_run_writes_its_outputs() {
         "phi",
         "sxx_c",
         "newton_iterations",
+        "factorizations",
         "augmentations",
         "max_penetration",
     ] {

@@ -1,16 +1,23 @@
 //! Trajectory logs of meshfree runs: `sdem run --mcap` writes each grain's boundary-node
 //! contour (`/contours`) with its mean stress; the log reads back equal to `grains.csv`, and
-//! `sdem render` / `sdem inspect` read it.
+//! `sdem render` / `sdem inspect` read it. `sdem resume --mcap` continues the log of a stopped
+//! or killed meshfree run to exactly the uninterrupted run's, and starts a new one holding the
+//! continued part when the file does not exist.
 
 use sdem::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+use sdem::output::mcap::McapSettings;
 use sdem::output::mcap::{
     TOPIC_CONTOURS, TOPIC_GRAINS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, Trajectory, scan_log,
 };
 use sdem::run::meshfree::Meshfree;
+use sdem::run::meshfree_checkpoint::MeshfreeCheckpoint;
+use sdem::run::{RunError, RunOptions, resume_run, run_scenario};
 use sdem::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
+
+mod common;
 
 /// Four discs squeezed by the walls for six steps (about a second); a frame every 3 steps and
 /// at jamming. Two grains touch a wall by the end: their mean stress is not zero.
@@ -263,21 +270,208 @@ fn render_and_inspect_read_a_meshfree_log() {
     assert!(stdout.contains(TOPIC_CONTOURS), "{stdout}");
 }
 
+/// A checkpoint every this many steps in the stopped and resumed runs.
+const EVERY: u64 = 4;
+
+fn options(out: &Path, log: &Path) -> RunOptions {
+    RunOptions {
+        mcap: Some(McapSettings::new(log)),
+        ..common::checkpointed(out, EVERY)
+    }
+}
+
+/// The log of the uninterrupted run of [`common::MESHFREE_FOUR`] (once per test binary).
+fn reference() -> &'static PathBuf {
+    static LOG: OnceLock<PathBuf> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let dir = common::temp_dir("mfmcap", "ref");
+        let log = dir.join("ref.mcap");
+        let summary = run_scenario(&common::meshfree_four(), &options(&dir, &log)).unwrap();
+        assert_eq!(summary.steps, 16);
+        log
+    })
+}
+
+/// Runs [`common::MESHFREE_FOUR`] into `dir` with `--mcap log`, stopped after step `stop`.
+fn stopped(dir: &Path, log: &Path, stop: u64) {
+    let mut opts = options(dir, log);
+    opts.stop_after_step = Some(stop);
+    match run_scenario(&common::meshfree_four(), &opts) {
+        Err(RunError::Interrupted { step, .. }) => assert_eq!(step, stop),
+        other => panic!("expected an interruption at {stop}, got {other:?}"),
+    }
+}
+
+/// Resumes the run of `dir/checkpoint.bin` with `--mcap log`, to its end or stopped after step
+/// `stop_after`.
+fn resume(dir: &Path, log: &Path, stop_after: Option<u64>) -> Result<(), RunError> {
+    let ckpt = dir.join("checkpoint.bin");
+    let c = MeshfreeCheckpoint::read(&ckpt).unwrap();
+    let mut opts = options(dir, log);
+    opts.stop_after_step = stop_after;
+    resume_run(&c, &ckpt, &opts).map(|_| ())
+}
+
+/// `sdem resume CHECKPOINT --mcap LOG --quiet`, which must succeed: its stderr.
+fn resume_cli(checkpoint: &Path, log: &Path) -> String {
+    let o = sdem()
+        .arg("resume")
+        .arg(checkpoint)
+        .arg("--mcap")
+        .arg(log)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{stderr}");
+    stderr
+}
+
 #[test]
-fn a_meshfree_run_does_not_continue_a_log() {
-    // Resuming needs meshfree checkpoints: the log side refuses clearly until then.
-    use sdem::output::mcap::{ContinueFrom, McapSettings};
-    use sdem::run::RunError;
-    use sdem::run::Simulation;
-    let scenario = Scenario::parse(FOUR_DISCS, "four.ron").unwrap();
-    let sim = Meshfree::new(&scenario).unwrap();
-    let dir = std::env::temp_dir().join(format!("sdem-mfmcap-cont-{}", std::process::id()));
-    let settings = McapSettings::new(dir.join("t.mcap"));
-    let from = ContinueFrom { step: 3, frames: 1 };
-    let Err(e) = sim.open_log(&settings, &scenario, Some(from)) else {
-        panic!("a continued meshfree log was opened");
-    };
-    assert!(matches!(e, RunError::Setup(_)), "{e:?}");
-    assert!(e.to_string().contains("meshfree"), "{e}");
-    assert!(!dir.join("t.mcap").exists());
+fn a_stopped_then_resumed_meshfree_log_is_the_uninterrupted_log() {
+    let reference = reference();
+    // Off a row step, before the first frame; at a row and checkpoint step in the isotropic
+    // phase, then again in the servo phase.
+    for stops in [vec![5], vec![1], vec![4, 11]] {
+        let dir = common::temp_dir("mfmcap", &format!("stop{}", stops[0]));
+        let log = dir.join("run.mcap");
+        stopped(&dir, &log, stops[0]);
+        let t = Trajectory::open(&log).unwrap();
+        assert_eq!(t.summary_info("status"), Some("interrupted"));
+        for &next in &stops[1..] {
+            let e = resume(&dir, &log, Some(next)).unwrap_err();
+            assert!(matches!(e, RunError::Interrupted { .. }), "{e}");
+            let t = Trajectory::open(&log).unwrap();
+            assert_eq!(t.summary_info("status"), Some("interrupted"));
+            let c = MeshfreeCheckpoint::read(&dir.join("checkpoint.bin")).unwrap();
+            assert_eq!(t.frame_count() as u64, c.loop_state.macro_rows);
+            assert!(t.frame(-1).unwrap().step <= next);
+        }
+        resume(&dir, &log, None).unwrap();
+        common::mcap::assert_same_log(reference, &log, 8);
+        let tmp = dir.join("run.mcap.resume.tmp");
+        assert!(!tmp.exists(), "{} left behind", tmp.display());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+#[test]
+fn an_unfinished_meshfree_log_is_continued_to_the_uninterrupted_log() {
+    let reference = reference();
+    // A run stopped at step 5 and resumed to its end: its log holds the whole run, frames after
+    // the step-5 checkpoint (kept aside with its macro.csv) included.
+    let dir = common::temp_dir("mfmcap", "unfinished");
+    let log = dir.join("run.mcap");
+    stopped(&dir, &log, 5);
+    let kept = dir.join("kept");
+    std::fs::create_dir_all(&kept).unwrap();
+    for file in ["checkpoint.bin", "macro.csv"] {
+        std::fs::copy(dir.join(file), kept.join(file)).unwrap();
+    }
+    let rows = MeshfreeCheckpoint::read(&kept.join("checkpoint.bin"))
+        .unwrap()
+        .loop_state
+        .macro_rows;
+    resume(&dir, &log, None).unwrap();
+    let whole = std::fs::read(&log).unwrap();
+    // The log cut as a killed writer leaves it: after its last chunk (and that chunk's message
+    // indexes), without the `sdem.summary` metadata, the data end and the summary section;
+    // then in the middle of that chunk.
+    let summary = ::mcap::Summary::read(&whole).unwrap().expect("a summary");
+    let last = summary.chunk_indexes.last().unwrap();
+    let chunks_end =
+        (last.chunk_start_offset + last.chunk_length + last.message_index_length) as usize;
+    let in_last_chunk = (last.chunk_start_offset + last.chunk_length / 2) as usize;
+    let mut beyond = 0;
+    for cut in [chunks_end, in_last_chunk] {
+        std::fs::write(&log, &whole[..cut]).unwrap();
+        let scan = scan_log(&log, |_, _| Ok(true)).unwrap();
+        assert!(!scan.finished);
+        let frames = scan.frames.len() as u64;
+        assert!(frames >= rows, "{frames} frames, {rows} in the checkpoint");
+        if frames > rows {
+            beyond += 1;
+        }
+        eprintln!(
+            "cut at byte {cut} of {}: {frames} frames, {rows} in the checkpoint",
+            whole.len()
+        );
+        for file in ["checkpoint.bin", "macro.csv"] {
+            std::fs::copy(kept.join(file), dir.join(file)).unwrap();
+        }
+        let stderr = resume_cli(&dir.join("checkpoint.bin"), &log);
+        assert!(stderr.contains("continuing the MCAP log"), "{stderr}");
+        assert!(stderr.contains("the log was unfinished"), "{stderr}");
+        common::mcap::assert_same_log(reference, &log, 8);
+    }
+    assert_eq!(beyond, 2, "a cut log held no frames after its checkpoint");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_missing_log_is_started_with_the_continued_part_of_a_meshfree_run() {
+    let reference = Trajectory::open(reference()).unwrap();
+    let dir = common::temp_dir("mfmcap", "missing");
+    stopped(&dir, &dir.join("first.mcap"), 5);
+    let log = dir.join("continued.mcap");
+    let stderr = resume_cli(&dir.join("checkpoint.bin"), &log);
+    assert!(stderr.contains("does not exist"), "{stderr}");
+    let t = Trajectory::open(&log).unwrap();
+    assert_eq!(t.summary_info("status"), Some("complete"));
+    assert_eq!(t.frame(0).unwrap().step, 6);
+    // The reference's frames after step 5, bit for bit.
+    let after: Vec<i64> = (0..reference.frame_count() as i64)
+        .filter(|&k| reference.frame(k).unwrap().step > 5)
+        .collect();
+    assert_eq!(t.frame_count(), after.len());
+    for (k, &r) in after.iter().enumerate() {
+        assert_eq!(
+            format!("{:?}", t.frame(k as i64).unwrap()),
+            format!("{:?}", reference.frame(r).unwrap()),
+            "frame {k}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_meshfree_resume_refuses_the_log_of_another_run() {
+    let base = common::temp_dir("mfmcap", "foreign");
+    let dir = base.join("run");
+    let log = dir.join("run.mcap");
+    stopped(&dir, &log, 5);
+    // The log of the same scenario with another seed, and the log of an SDEM run.
+    let other = base.join("other");
+    let mut s = common::meshfree_four();
+    s.seed += 1;
+    let mut o = options(&other, &other.join("other.mcap"));
+    o.stop_after_step = Some(5);
+    assert!(run_scenario(&s, &o).is_err());
+    let sdem_dir = base.join("sdem");
+    let mut o = options(&sdem_dir, &sdem_dir.join("sdem.mcap"));
+    o.stop_after_step = Some(100);
+    assert!(run_scenario(&common::small_compaction(), &o).is_err());
+    for (foreign, words) in [
+        (
+            other.join("other.mcap"),
+            &["not the log of this run", "seed"][..],
+        ),
+        (sdem_dir.join("sdem.mcap"), &["no /contours channel"][..]),
+    ] {
+        let bytes = std::fs::read(&foreign).unwrap();
+        std::fs::write(&log, &bytes).unwrap();
+        let e = resume(&dir, &log, None).unwrap_err().to_string();
+        eprintln!("{}: {e}", foreign.display());
+        for w in [log.to_str().unwrap(), "cannot continue"]
+            .iter()
+            .chain(words)
+        {
+            assert!(e.contains(w), "{e:?} lacks {w:?}");
+        }
+        // Each key that differs is named once.
+        assert!(e.matches("seed:").count() <= 1, "{e}");
+        assert!(std::fs::read(&log).unwrap() == bytes, "log changed: {e}");
+        assert!(!dir.join("run.mcap.resume.tmp").exists());
+    }
+    std::fs::remove_dir_all(&base).ok();
 }

@@ -81,7 +81,7 @@ fn read_csv(path: &std::path::Path) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 #[test]
-#[ignore = "release: the 100-grain scenario, about an hour on 2 cores"]
+#[ignore = "release: the 100-grain scenario, about 40 minutes on 2 cores"]
 fn biaxial_100_runs_its_three_phases() {
     // The two-disc check first (its lines are part of this test's report).
     let mut worst = 0.0f64;
@@ -103,6 +103,11 @@ fn biaxial_100_runs_its_three_phases() {
             path.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
+            // The trajectory for pictures, and a checkpoint to resume from if it stops.
+            "--mcap",
+            out.join("run.mcap").to_str().unwrap(),
+            "--checkpoint-every",
+            "20",
         ])
         .status()
         .unwrap();

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The meshfree bouncing disc (Mollon 2016, §5, fig. 7-8) with the Bathe composite scheme and the trapezoidal rule.
+"""The meshfree bouncing disc (Mollon 2016, §5, fig. 7-8) with the Bathe composite scheme, the trapezoidal rule
+and the explicit scheme (central differences, lumped mass, penalty contacts).
 
 usage: tools/bouncing_disc.py [--sdem target/release/sdem] [--out out/bouncing_disc] [--t-end 4]
                               [--scenario scenarios/meshfree_bouncing_disc.ron] [--threads 1]
@@ -9,7 +10,9 @@ Writes two variants of the scenario into OUT and runs them one after the other
 (`sdem run VARIANT --out OUT/<scheme> --quiet --threads 1`):
   - bathe:       scheme Bathe, dt = 0.02 (two sub-steps of dt/2 per step);
   - trapezoidal: scheme Trapezoidal, dt = 0.01: the same number of implicit solves as Bathe's
-                 two sub-steps, the paper's fair comparison.
+                 two sub-steps, the paper's fair comparison;
+  - explicit:    scheme CentralDifference, output every 0.02 (sdem sub-steps below the critical
+                 step), k0 = 100 E/R: penalty contacts penetrate by p / k0.
 Both relax until --t-end. Runs that already have a summary.txt are reused (delete OUT to rerun).
 
 From each macro.csv it takes the kinetic, elastic and gravitational potential energies, the
@@ -34,16 +37,22 @@ not used: the chart goes to docs/images/, the CSVs to DIR).
 """
 import argparse, csv, math, pathlib, re, shutil, subprocess, sys, time
 
-SCHEMES = [  # (label, scheme, dt, colour, implicit solves per step)
-    ("bathe", "Bathe", 0.02, "#1f5fb4", 2),
-    ("trapezoidal", "Trapezoidal", 0.01, "#d2461e", 1),
+SCHEMES = [  # (label, scheme, dt, colour, implicit solves per step, k0 in E/R or None: the scenario's)
+    ("bathe", "Bathe", 0.02, "#1f5fb4", 2, None),
+    ("trapezoidal", "Trapezoidal", 0.01, "#d2461e", 1, None),
+    # Explicit: penalty contacts (no augmentation), so k0 sets the penetration, p / k0: ten
+    # times the implicit runs' k0. dt is the output step; sdem sub-steps it below the
+    # critical step by itself.
+    ("explicit", "CentralDifference", 0.02, "#2a9d3a", 0, 100.0),
 ]
 RISE = 1e-6  # relative rise of the total energy between two steps that counts as a rise
 
 
-def variant_text(base, base_dir, name, scheme, dt, t_end):
+def variant_text(base, base_dir, name, scheme, dt, t_end, k0=None):
     t = re.sub(r'name: "[^"]*"', f'name: "{name}"', base)
     t = re.sub(r"scheme: \w+", f"scheme: {scheme}", t)
+    if k0 is not None:
+        t = re.sub(r"k0: [0-9.eE+-]+", f"k0: {k0}", t)
     t = re.sub(r"time_step: Fixed\([0-9.eE+-]+\)", f"time_step: Fixed({dt})", t)
     t = re.sub(r"until: Time\([0-9.eE+-]+\)", f"until: Time({t_end})", t)
     # The sample file is relative to the scenario: make it absolute.
@@ -125,7 +134,7 @@ def svg_chart(runs, t_end, path, title, gap_tolerance):
     for label, _, dt, colour in runs:
         out.append(f'<line x1="{lx}" x2="{lx+24}" y1="40" y2="40" stroke="{colour}" stroke-width="2"/>'
                    f'<text x="{lx+30}" y="44">{label}, dt = {dt:g}</text>')
-        lx += 230
+        lx += 235
     for k, (name, key, log, floor_exp) in enumerate(panels):
         top = mt + k * (ph + gap)
         bottom = top + ph
@@ -210,9 +219,9 @@ def main():
           f"(pi R^2 = {math.pi*radius**2:.9f}), g = {g:g}, initial height {y0:g}")
 
     runs, summaries = [], []
-    for label, scheme, dt, colour, solves in SCHEMES:
+    for label, scheme, dt, colour, solves, k0 in SCHEMES:
         scenario = out / f"{label}.ron"
-        scenario.write_text(variant_text(base, base_path.parent, f"meshfree_bouncing_disc_{label}", scheme, dt, a.t_end))
+        scenario.write_text(variant_text(base, base_path.parent, f"meshfree_bouncing_disc_{label}", scheme, dt, a.t_end, k0))
         run_dir = out / label
         if not (run_dir / "summary.txt").exists():
             t0 = time.time()
@@ -258,7 +267,7 @@ def main():
 
     svg = out / "meshfree_bouncing_disc.svg"
     svg_chart(runs, a.t_end, svg,
-              f"Meshfree bouncing disc (E = 50, alpha = 1): Bathe composite vs trapezoidal rule, same cost",
+              f"Meshfree bouncing disc (E = 50, alpha = 1): Bathe composite, trapezoidal rule (same cost), explicit",
               number(base, "gap_tolerance"))
 
     print()
@@ -277,12 +286,12 @@ def main():
         wr = csv.DictWriter(f, fieldnames=list(summaries[0]))
         wr.writeheader()
         wr.writerows(summaries)
-    print(f"wrote {out}/bathe.csv, {out}/trapezoidal.csv, {out}/summary.csv and {svg}")
+    print(f"wrote {', '.join(f'{out}/{s[0]}.csv' for s in SCHEMES)}, {out}/summary.csv and {svg}")
 
     if a.docs:
         d = pathlib.Path(a.docs)
         d.mkdir(parents=True, exist_ok=True)
-        for name in ("bathe.csv", "trapezoidal.csv", "summary.csv"):
+        for name in [f"{s[0]}.csv" for s in SCHEMES] + ["summary.csv"]:
             shutil.copy(out / name, d / name)
         images = pathlib.Path("docs/images")
         images.mkdir(parents=True, exist_ok=True)

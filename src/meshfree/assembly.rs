@@ -26,6 +26,27 @@ use super::solver::{
     DynamicTerms, SolveStats, SolverSettings, TimeScheme, finite_residual_norm, newton_update,
 };
 use super::sparse::{SparseSolver, TripletMatrix};
+
+mod explicit;
+pub use explicit::{EXPLICIT_SAFETY, ExplicitData};
+
+/// A Newton step reuses the last factorization when the step before it shrank the residual
+/// at least this much (the iterate is then close enough for the old tangent to contract too).
+const REUSE_CONTRACTION: f64 = 0.1;
+
+/// An augmentation that cannot be the last ends once the Newton correction is below this
+/// fraction of the largest gap's excess over the tolerance: the gap is then known to exceed
+/// it, and the next augmentation starts from the iterate.
+const EARLY_AUGMENTATION_STEP: f64 = 0.05;
+
+/// How a Newton loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum NewtonEnd {
+    /// The residual is below the force tolerance.
+    Converged,
+    /// Stopped early: a gap is known to exceed the tolerance, another augmentation follows.
+    GapOpen,
+}
 use crate::boundary::walls::Wall;
 
 /// What a slave node presses against.
@@ -219,15 +240,22 @@ pub struct Assembly {
     initial_stiffness: Vec<Vec<[f64; 4]>>,
     solver: SparseSolver,
     contact_pattern: ContactPattern,
+    /// Lumped mass and critical step, once the explicit scheme is used.
+    explicit: Option<ExplicitData>,
 }
 
-/// The node pairs that contact elements couple in the sparse tangent: the union of the pairs
-/// of the elements met since the last reset, so that the triplets' index sequence (and with it
-/// the sparse solver's symbolic analysis) stays the same while the active contacts change
-/// within it. Pairs of elements that have become inactive stay with zero values until the
-/// pattern is cleared at the start of the next step: the pattern, which decides the pivots of
-/// the factorization and hence the last bits of the solution, then depends on the step's own
-/// iterations only, and a run resumed from a checkpoint continues bit for bit.
+/// The node pairs that contact elements couple in the sparse tangent, kept from step to step
+/// so that the triplets' index sequence (and with it the sparse solver's symbolic analysis)
+/// stays the same while the contacts change within it. When an element needs a pair the
+/// pattern lacks, the pattern takes the pairs of a window of [`PATTERN_WINDOW`] contour nodes
+/// on either side of every node of every current element: a contact that slides by a few
+/// nodes, or spreads to the neighbouring nodes, then stays inside it. Pairs of elements that
+/// have opened stay with zero values; the pattern is rebuilt from the current elements alone
+/// when these would need less than half of it.
+///
+/// The pattern decides the pivots of the factorization and hence the last bits of the
+/// solution: it depends on the run's history, and checkpoints store it so that a resumed run
+/// continues bit for bit.
 #[derive(Debug, Default)]
 struct ContactPattern {
     /// (x DoF of the row node, x DoF of the column node), sorted.
@@ -235,11 +263,25 @@ struct ContactPattern {
     slot: std::collections::HashMap<(usize, usize), usize>,
 }
 
+/// Contour nodes on either side of an element's nodes that the contact pattern couples too.
+const PATTERN_WINDOW: usize = 3;
+
 impl ContactPattern {
+    fn from_pairs(mut pairs: Vec<(usize, usize)>) -> Self {
+        pairs.sort_unstable();
+        pairs.dedup();
+        let slot = pairs.iter().enumerate().map(|(k, &p)| (p, k)).collect();
+        Self { pairs, slot }
+    }
+
     /// The elements' stiffness (negated: the tangent of the residual) summed on the pattern,
-    /// after adding the pairs it lacks. Blocks `[K_xx, K_yx, K_xy, K_yy]`.
-    fn gather(&mut self, elements: &[ContactElement]) -> Vec<[f64; 4]> {
-        let mut missing = Vec::new();
+    /// after extending it if it lacks a pair (see [`ContactPattern`]); `window` lists the x DoF
+    /// of the contour nodes near an element's nodes. Blocks `[K_xx, K_yx, K_xy, K_yy]`.
+    fn gather(
+        &mut self,
+        elements: &[ContactElement],
+        window: impl Fn(&ContactElement) -> Vec<usize>,
+    ) -> Vec<[f64; 4]> {
         fn node_pairs(
             e: &ContactElement,
         ) -> impl Iterator<Item = (usize, usize, (usize, usize))> + '_ {
@@ -247,23 +289,27 @@ impl ContactPattern {
             let d = &e.dofs;
             (0..nodes).flat_map(move |p| (0..nodes).map(move |q| (p, q, (d[2 * p], d[2 * q]))))
         }
-        for e in elements {
-            for (_, _, key) in node_pairs(e) {
-                if !self.slot.contains_key(&key) {
-                    missing.push(key);
-                }
+        let complete = elements
+            .iter()
+            .all(|e| node_pairs(e).all(|(_, _, key)| self.slot.contains_key(&key)));
+        if !complete {
+            let mut needed = Vec::new();
+            for e in elements {
+                let nodes = window(e);
+                needed.extend(
+                    nodes
+                        .iter()
+                        .flat_map(|&a| nodes.iter().map(move |&b| (a, b))),
+                );
             }
-        }
-        if !missing.is_empty() {
-            self.pairs.extend(missing);
-            self.pairs.sort_unstable();
-            self.pairs.dedup();
-            self.slot = self
-                .pairs
-                .iter()
-                .enumerate()
-                .map(|(k, &p)| (p, k))
-                .collect();
+            let needed = Self::from_pairs(needed);
+            if 2 * needed.pairs.len() < self.pairs.len() {
+                *self = needed;
+            } else {
+                let mut pairs = std::mem::take(&mut self.pairs);
+                pairs.extend(needed.pairs);
+                *self = Self::from_pairs(pairs);
+            }
         }
         let mut values = vec![[0.0; 4]; self.pairs.len()];
         for e in elements {
@@ -278,11 +324,6 @@ impl ContactPattern {
         }
         values
     }
-
-    fn clear(&mut self) {
-        self.pairs.clear();
-        self.slot.clear();
-    }
 }
 
 /// One grain's share of an evaluation.
@@ -294,6 +335,27 @@ struct GrainTerms {
     energy: f64,
     /// Largest magnitude of the terms summed into `residual`.
     scale: f64,
+}
+
+/// The x DoF of the contour nodes within [`PATTERN_WINDOW`] of the nodes among `dofs` (x and
+/// y DoF of nodes, in pairs), sorted; interior nodes stand for themselves.
+fn contour_window(grains: &[GrainModel], offsets: &[usize], dofs: &[usize]) -> Vec<usize> {
+    let mut out = Vec::new();
+    for &dof in dofs.iter().step_by(2) {
+        let g = offsets.partition_point(|&o| o <= dof) - 1;
+        let (off, nb) = (offsets[g], grains[g].nodes.boundary_count);
+        let a = (dof - off) / 2;
+        if a >= nb {
+            out.push(dof);
+            continue;
+        }
+        for d in 0..=2 * PATTERN_WINDOW {
+            out.push(off + 2 * ((a + nb + d - PATTERN_WINDOW) % nb));
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// Current boundary positions of a grain.
@@ -379,6 +441,7 @@ impl Assembly {
             initial_stiffness,
             solver: SparseSolver::new(),
             contact_pattern: ContactPattern::default(),
+            explicit: None,
         })
     }
 
@@ -672,7 +735,10 @@ impl Assembly {
                 }
             }
         }
-        let values = self.contact_pattern.gather(&eval.elements);
+        let (grains, offsets) = (&self.grains, &self.offsets);
+        let values = self
+            .contact_pattern
+            .gather(&eval.elements, |e| contour_window(grains, offsets, &e.dofs));
         for (&(ra, cb), blk) in self.contact_pattern.pairs.iter().zip(&values) {
             for (q, (dr, dc)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
                 let (row, col) = (ra + dr, cb + dc);
@@ -692,35 +758,105 @@ impl Assembly {
             .all(|g| self.grains[g].all_points_valid(self.grain_slice(u, g)))
     }
 
-    /// Newton iterations at fixed multipliers and contact stiffness. The convergence test
-    /// needs the residual only: the tangent (several times its cost) is computed only when
-    /// another iteration follows.
+    /// Lumped mass and critical step, once the explicit scheme is in use.
+    pub fn explicit_data(&self) -> Option<&ExplicitData> {
+        self.explicit.as_ref()
+    }
+
+    /// The node pairs (x DoF, x DoF) the sparse tangent holds for contacts (see
+    /// [`ContactPattern`]): part of the state a resumed run needs to continue bit for bit.
+    pub fn contact_pattern(&self) -> &[(usize, usize)] {
+        &self.contact_pattern.pairs
+    }
+
+    /// Sets the contact pattern (from a checkpoint); pairs outside the DoF or on a y DoF are
+    /// refused.
+    pub fn set_contact_pattern(&mut self, pairs: Vec<(usize, usize)>) -> Result<(), String> {
+        let n = self.dofs();
+        if let Some(p) = pairs
+            .iter()
+            .find(|&&(a, b)| a >= n || b >= n || a % 2 != 0 || b % 2 != 0)
+        {
+            return Err(format!("contact pattern pair {p:?} for {n} DoF"));
+        }
+        self.contact_pattern = ContactPattern::from_pairs(pairs);
+        Ok(())
+    }
+
+    /// Newton iterations at fixed multipliers and contact stiffness, until the residual is
+    /// below the force tolerance, or, with `open_gap_tolerance`, as soon as the iterate is
+    /// known well enough to tell that a gap exceeds that tolerance (the last correction is
+    /// below [`EARLY_AUGMENTATION_STEP`] of the excess): another augmentation follows anyway,
+    /// and converging this one fully would be wasted (an inexact inner solve, which the next
+    /// augmentation corrects; the last augmentation is always converged fully).
+    ///
+    /// A step reuses the last factorization (modified Newton) when the step before it shrank
+    /// the residual by at least [`REUSE_CONTRACTION`]: near the solution the tangent hardly
+    /// changes, and a residual with a solve costs a fraction of a tangent with its
+    /// factorization. A modified step that does not reduce the residual is undone and redone
+    /// with the tangent. The convergence test needs the residual only: the tangent is
+    /// computed only when a full step follows.
     fn newton(
         &mut self,
         u: &mut Vec<f64>,
         multipliers: &ContactMultipliers,
         k: f64,
         dynamic: Option<&DynamicTerms>,
+        open_gap_tolerance: Option<f64>,
         stats: &mut SolveStats,
-    ) -> Result<Evaluation, MeshfreeError> {
+    ) -> Result<(Evaluation, NewtonEnd), MeshfreeError> {
         let mut tangent = TripletMatrix::new(self.dofs());
         let mut eval = self.evaluate(u, multipliers, k, dynamic, false)?;
+        let mut norm = finite_residual_norm(&eval.residual)?;
+        let mut previous_norm = f64::INFINITY;
+        // Whether the solver holds a factorization of this loop's tangent.
+        let mut factorized = false;
+        // Largest component of the last correction applied (a length).
+        let mut last_correction = f64::INFINITY;
+        // The iterate before a modified step, to undo it if it fails.
+        let mut before_modified: Option<(Vec<f64>, Evaluation, f64)> = None;
         for _ in 0..self.settings.max_newton {
-            let norm = finite_residual_norm(&eval.residual)?;
             if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
-                return Ok(eval);
+                return Ok((eval, NewtonEnd::Converged));
             }
+            if let Some(tolerance) = open_gap_tolerance {
+                let gap = eval.max_abs_gap();
+                if gap > tolerance && last_correction <= EARLY_AUGMENTATION_STEP * (gap - tolerance)
+                {
+                    return Ok((eval, NewtonEnd::GapOpen));
+                }
+            }
+            let modified_failed = before_modified.is_some() && norm >= previous_norm;
+            if modified_failed {
+                let (u0, eval0, norm0) = before_modified.take().expect("checked above");
+                *u = u0;
+                eval = eval0;
+                norm = norm0;
+            }
+            let reuse = factorized && !modified_failed && norm <= REUSE_CONTRACTION * previous_norm;
             stats.newton_iterations += 1;
-            let with_tangent = self.evaluate(u, multipliers, k, dynamic, true)?;
-            self.fill_tangent(&with_tangent, &mut tangent);
-            let mut du: Vec<f64> = with_tangent.residual.iter().map(|v| -v).collect();
-            self.solver.solve(&tangent, &mut du)?;
-            newton_update(u, &du, |trial| self.all_points_valid(trial))?;
+            let mut du: Vec<f64>;
+            if reuse {
+                before_modified = Some((u.clone(), eval.clone(), norm));
+                du = eval.residual.iter().map(|v| -v).collect();
+                self.solver.solve_factored(&mut du)?;
+            } else {
+                before_modified = None;
+                let with_tangent = self.evaluate(u, multipliers, k, dynamic, true)?;
+                self.fill_tangent(&with_tangent, &mut tangent);
+                du = with_tangent.residual.iter().map(|v| -v).collect();
+                self.solver.solve(&tangent, &mut du)?;
+                stats.factorizations += 1;
+                factorized = true;
+            }
+            let applied = newton_update(u, &du, |trial| self.all_points_valid(trial))?;
+            last_correction = applied * du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            previous_norm = norm;
             eval = self.evaluate(u, multipliers, k, dynamic, false)?;
+            norm = finite_residual_norm(&eval.residual)?;
         }
-        let norm = eval.residual.iter().fold(0.0f64, |s, v| s.max(v.abs()));
         if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
-            return Ok(eval);
+            return Ok((eval, NewtonEnd::Converged));
         }
         Err(MeshfreeError::NotConverged(format!(
             "Newton did not converge in {} iterations (residual {norm:.3e} > {:.1e})",
@@ -739,15 +875,17 @@ impl Assembly {
         let s = self.settings;
         let mut k = s.k0;
         let mut stats = SolveStats::default();
-        for _ in 0..s.max_augmentations {
-            let eval = self.newton(u, multipliers, k, dynamic, &mut stats)?;
+        for augmentation in 0..s.max_augmentations {
+            // The last allowed augmentation is converged fully whatever its gap.
+            let open_gap = (augmentation + 1 < s.max_augmentations).then_some(s.gap_tolerance);
+            let (eval, end) = self.newton(u, multipliers, k, dynamic, open_gap, &mut stats)?;
             multipliers.clear();
             for e in &eval.elements {
                 multipliers.insert(e.key, e.pressure);
             }
             stats.augmentations += 1;
             stats.max_penetration = eval.max_penetration();
-            if eval.max_abs_gap() <= s.gap_tolerance {
+            if end == NewtonEnd::Converged && eval.max_abs_gap() <= s.gap_tolerance {
                 return Ok((eval, stats));
             }
             k *= s.alpha_k;
@@ -786,12 +924,11 @@ impl Assembly {
         dt: f64,
         scheme: TimeScheme,
     ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
-        self.contact_pattern.clear();
         let walls0 = self.walls.clone();
         let (u0, v0, a0) = (&state.u, &state.v, &state.a);
         let mut stats = SolveStats::default();
         let mid = match scheme {
-            TimeScheme::Trapezoidal => dt,
+            TimeScheme::Trapezoidal | TimeScheme::CentralDifference => dt,
             TimeScheme::Bathe => 0.5 * dt,
         };
         let mut multipliers = state.multipliers.clone();
@@ -802,7 +939,7 @@ impl Assembly {
         stats += s;
         let v1 = terms.velocity(&u1);
         let (u, v, a) = match scheme {
-            TimeScheme::Trapezoidal => {
+            TimeScheme::Trapezoidal | TimeScheme::CentralDifference => {
                 let a = terms.acceleration(&u1);
                 (u1, v1, a)
             }
@@ -835,7 +972,11 @@ impl Assembly {
         scheme: TimeScheme,
     ) -> Result<(Evaluation, StepStats), MeshfreeError> {
         let saved = (state.clone(), self.walls.clone());
-        match self.sub_steps(state, dt, 1.0, scheme) {
+        let result = match scheme {
+            TimeScheme::CentralDifference => self.explicit_step(state, dt),
+            TimeScheme::Bathe | TimeScheme::Trapezoidal => self.sub_steps(state, dt, 1.0, scheme),
+        };
+        match result {
             Ok(r) => Ok(r),
             Err(e) => {
                 *state = saved.0;
@@ -886,8 +1027,14 @@ impl Assembly {
     }
 
     /// Potential energy of the body forces, `-f_ext . x` over the current node positions (for
-    /// gravity, `-m g . x_c` summed over grains: the consistent body force reproduces it).
+    /// gravity, `-m g . x_c` summed over grains: the consistent body force reproduces it; the
+    /// explicit scheme's lumped body force too).
     pub fn potential_energy(&self, u: &[f64]) -> f64 {
+        if let Some(x) = &self.explicit {
+            return -(0..u.len())
+                .map(|i| x.lumped_mass[i] * self.gravity[i % 2] * (self.reference(i) + u[i]))
+                .sum::<f64>();
+        }
         let mut e = 0.0;
         for (g, model) in self.grains.iter().enumerate() {
             let off = self.offsets[g];
@@ -900,8 +1047,22 @@ impl Assembly {
         e
     }
 
-    /// Kinetic energy `v^T M v / 2`.
+    /// Reference coordinate of DoF `i` (x or y of its node).
+    fn reference(&self, i: usize) -> f64 {
+        let g = self.offsets.partition_point(|&o| o <= i) - 1;
+        let local = i - self.offsets[g];
+        self.grains[g].nodes.positions[local / 2][local % 2]
+    }
+
+    /// Kinetic energy `v^T M v / 2` (the lumped mass with the explicit scheme).
     pub fn kinetic_energy(&self, v: &[f64]) -> f64 {
+        if let Some(x) = &self.explicit {
+            return 0.5
+                * v.iter()
+                    .zip(&x.lumped_mass)
+                    .map(|(v, m)| m * v * v)
+                    .sum::<f64>();
+        }
         let mut e = 0.0;
         for (g, model) in self.grains.iter().enumerate() {
             let vg = self.grain_slice(v, g);

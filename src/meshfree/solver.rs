@@ -47,7 +47,10 @@ impl Default for SolverSettings {
 /// Iteration counts of one solve.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SolveStats {
+    /// Newton steps, with the tangent or reusing the last factorization.
     pub newton_iterations: usize,
+    /// Newton steps with a new tangent and factorization (the costly ones).
+    pub factorizations: usize,
     pub augmentations: usize,
     /// max |g| over active contacts at the end.
     pub max_penetration: f64,
@@ -56,6 +59,7 @@ pub struct SolveStats {
 impl std::ops::AddAssign for SolveStats {
     fn add_assign(&mut self, o: Self) {
         self.newton_iterations += o.newton_iterations;
+        self.factorizations += o.factorizations;
         self.augmentations += o.augmentations;
         self.max_penetration = self.max_penetration.max(o.max_penetration);
     }
@@ -151,18 +155,18 @@ pub(crate) fn finite_residual_norm(r: &[f64]) -> Result<f64, MeshfreeError> {
 
 /// Applies a Newton correction `du` to `u` with step length control: `u + alpha du` for
 /// alpha = 1, 1/2, 1/4, … (30 tries), the first at which `valid` holds (no material point
-/// inverted). An error if none does.
+/// inverted). Returns that alpha; an error if none does.
 pub(crate) fn newton_update(
     u: &mut Vec<f64>,
     du: &[f64],
     valid: impl Fn(&[f64]) -> bool,
-) -> Result<(), MeshfreeError> {
+) -> Result<f64, MeshfreeError> {
     let mut alpha = 1.0;
     for _ in 0..30 {
         let trial: Vec<f64> = u.iter().zip(du).map(|(u, d)| u + alpha * d).collect();
         if valid(&trial) {
             *u = trial;
-            return Ok(());
+            return Ok(alpha);
         }
         alpha *= 0.5;
     }
@@ -303,6 +307,7 @@ impl Problem<'_> {
                 return Ok(states);
             }
             stats.newton_iterations += 1;
+            stats.factorizations += 1;
             let mut du: Vec<f64> = r.iter().map(|v| -v).collect();
             lu_solve(&mut tangent, &mut du)?;
             newton_update(u, &du, |trial| self.model.all_points_valid(trial))?;
@@ -357,6 +362,9 @@ pub enum TimeScheme {
     Bathe,
     /// Plain Newmark trapezoidal rule (average acceleration) on dt.
     Trapezoidal,
+    /// Explicit central differences with lumped mass and penalty contacts, in sub-steps below
+    /// the critical step (assemblies only; see `assembly::explicit`).
+    CentralDifference,
 }
 
 /// State of a dynamic run.
@@ -457,6 +465,11 @@ impl<'a> Dynamics<'a> {
         let mid = match scheme {
             TimeScheme::Trapezoidal => dt,
             TimeScheme::Bathe => 0.5 * dt,
+            TimeScheme::CentralDifference => {
+                return Err(MeshfreeError::BadInput(
+                    "the single-disc solver is implicit: use Bathe or Trapezoidal".into(),
+                ));
+            }
         };
         let terms = DynamicTerms::trapezoidal(mid, &u0, &v0, &a0, damping);
         let mut u1 = u0.clone();
@@ -464,7 +477,7 @@ impl<'a> Dynamics<'a> {
         stats += s;
         let v1 = terms.velocity(&u1);
         match scheme {
-            TimeScheme::Trapezoidal => {
+            TimeScheme::Trapezoidal | TimeScheme::CentralDifference => {
                 state.a = terms.acceleration(&u1);
                 state.v = v1;
                 state.u = u1;

@@ -944,6 +944,10 @@ pub struct TrajectoryWriter {
     text: String,
 }
 
+/// A new log's writer with the `sdem.run` metadata and the scenario attachment it wrote (see
+/// [`TrajectoryWriter::create_log`]).
+type WithPreamble = (TrajectoryWriter, BTreeMap<String, String>, String);
+
 /// A row of [`TrajectoryWriter::channel_table`].
 type ChannelRow = (
     u16,
@@ -1007,7 +1011,7 @@ impl TrajectoryWriter {
         settings: &McapSettings,
         scenario: &Scenario,
         world: &World,
-    ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
+    ) -> Result<WithPreamble, WriteError> {
         let p = &world.params;
         let info = RunInfo {
             grains: world.grains.len(),
@@ -1055,7 +1059,7 @@ impl TrajectoryWriter {
         scene_schema: &str,
         info: RunInfo<'_>,
         add_bodies: impl FnOnce(&mut McapWriter, &str) -> Result<Bodies, WriteError>,
-    ) -> Result<(Self, BTreeMap<String, String>, String), WriteError> {
+    ) -> Result<WithPreamble, WriteError> {
         let (path, mut inner, handle) = Self::open_file(settings)?;
         let bodies = add_bodies(&mut inner, &path)?;
         let walls = add_channel(

@@ -234,11 +234,25 @@ impl Meshfree {
         )
         .map_err(|e| RunError::Setup(format!("meshfree assembly: {e}")))?;
         assembly.min_sub_step = settings.min_sub_step;
+        if settings.scheme == TimeScheme::CentralDifference {
+            if settings.rayleigh_beta != 0.0 {
+                return Err(RunError::Setup(
+                    "model.rayleigh_beta: the explicit scheme (CentralDifference) takes \
+                     mass-proportional damping only: set it to 0"
+                        .into(),
+                ));
+            }
+            assembly
+                .use_explicit()
+                .map_err(|e| RunError::Setup(format!("meshfree explicit scheme: {e}")))?;
+        }
         let dt = match scenario.time_step {
             TimeStep::Fixed(dt) => dt,
             TimeStep::FractionOfCritical(_) => {
                 return Err(RunError::Setup(
-                    "time_step: the meshfree solver is implicit: give a Fixed(dt)".into(),
+                    "time_step: give the meshfree solver a Fixed(dt) (the explicit scheme \
+                     sub-steps it below its critical step by itself)"
+                        .into(),
                 ));
             }
         };
@@ -375,6 +389,7 @@ impl Simulation for Meshfree {
     type Failure = MeshfreeError;
     const EXTRA_COLUMNS: &'static [&'static str] = &[
         "newton_iterations",
+        "factorizations",
         "augmentations",
         "sub_steps",
         "max_penetration",
@@ -479,8 +494,9 @@ impl Simulation for Meshfree {
         let s = &self.stats;
         let _ = write!(
             row,
-            ",{},{},{},{:.6e},{:.9e}",
+            ",{},{},{},{},{:.6e},{:.9e}",
             s.solve.newton_iterations,
+            s.solve.factorizations,
             s.solve.augmentations,
             s.sub_steps,
             self.last.max_penetration(),
@@ -506,12 +522,6 @@ impl Simulation for Meshfree {
         scenario: &Scenario,
         continue_from: Option<ContinueFrom>,
     ) -> Result<TrajectoryWriter, RunError> {
-        if continue_from.is_some() {
-            return Err(RunError::Setup(format!(
-                "{}: continuing the MCAP log of a meshfree run is not implemented yet",
-                settings.path.display()
-            )));
-        }
         let info = ContourLogInfo {
             grains: self.assembly.grains.len(),
             boundary_nodes: self
@@ -522,8 +532,12 @@ impl Simulation for Meshfree {
                 .sum(),
             dt: self.dt,
         };
-        TrajectoryWriter::create_contours(settings, scenario, &info)
-            .map_err(|e| io_error(&settings.path)(e.into()))
+        super::open_log(
+            settings,
+            continue_from,
+            || TrajectoryWriter::create_contours(settings, scenario, &info),
+            |from| TrajectoryWriter::continue_contours(settings, scenario, &info, from),
+        )
     }
 
     fn write_frame(&self, log: &mut TrajectoryWriter, row: &Measures) -> Result<(), WriteError> {
@@ -583,6 +597,9 @@ impl Meshfree {
         let mut sim = Self::new(&c.scenario)?;
         c.check_fits(&sim.assembly).map_err(RunError::Resume)?;
         sim.assembly.walls = c.walls.clone();
+        sim.assembly
+            .set_contact_pattern(c.contact_pattern.clone())
+            .map_err(RunError::Resume)?;
         sim.state = c.state.clone();
         sim.step = c.step;
         sim.last = c.last.clone();

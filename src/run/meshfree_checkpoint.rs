@@ -53,6 +53,8 @@ pub struct MeshfreeCheckpoint {
     pub last: Evaluation,
     /// The last step's counters.
     pub stats: StepStats,
+    /// The sparse tangent's contact pattern (it decides the factorization's pivots).
+    pub contact_pattern: Vec<(usize, usize)>,
 }
 
 /// A contact key: slave grain, slave node, master kind (0: grain, 1: wall), master index.
@@ -234,6 +236,9 @@ impl EvaluationBits {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StatsBits {
     pub newton_iterations: u64,
+    /// Absent from checkpoints written before it was counted (read as 0).
+    #[serde(default)]
+    pub factorizations: u64,
     pub augmentations: u64,
     pub max_penetration: Bits,
     pub sub_steps: u64,
@@ -272,6 +277,9 @@ pub struct MeshfreeStored {
     pub last_good: StateBits,
     pub last: EvaluationBits,
     pub stats: StatsBits,
+    /// Absent from checkpoints written before the pattern was kept across steps.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub contact_pattern: Vec<[u64; 2]>,
 }
 
 fn u64_of(n: usize) -> u64 {
@@ -298,6 +306,7 @@ impl MeshfreeCheckpoint {
             last_good: sim.last_good.clone(),
             last: sim.last.clone(),
             stats: sim.stats,
+            contact_pattern: sim.assembly.contact_pattern().to_vec(),
         }
     }
 
@@ -335,10 +344,16 @@ impl MeshfreeCheckpoint {
             last: (&self.last).into(),
             stats: StatsBits {
                 newton_iterations: u64_of(s.solve.newton_iterations),
+                factorizations: u64_of(s.solve.factorizations),
                 augmentations: u64_of(s.solve.augmentations),
                 max_penetration: s.solve.max_penetration.into(),
                 sub_steps: u64_of(s.sub_steps),
             },
+            contact_pattern: self
+                .contact_pattern
+                .iter()
+                .map(|&(a, b)| [u64_of(a), u64_of(b)])
+                .collect(),
         }
     }
 
@@ -401,6 +416,7 @@ impl MeshfreeCheckpoint {
         let stats = StepStats {
             solve: SolveStats {
                 newton_iterations: usize_of(t.newton_iterations, "Newton iterations")?,
+                factorizations: usize_of(t.factorizations, "factorizations")?,
                 augmentations: usize_of(t.augmentations, "augmentations")?,
                 max_penetration: t.max_penetration.into(),
             },
@@ -418,6 +434,11 @@ impl MeshfreeCheckpoint {
             last_good: (s.last_good_step, last_good),
             last,
             stats,
+            contact_pattern: s
+                .contact_pattern
+                .iter()
+                .map(|&[a, b]| Ok((usize_of(a, "pattern DoF")?, usize_of(b, "pattern DoF")?)))
+                .collect::<Result<_, String>>()?,
             scenario: s.scenario,
         })
     }

@@ -26,7 +26,7 @@ use crate::grain::Grain;
 use crate::integration::{Instability, StepTotals, World};
 use crate::output::MacroWriter;
 use crate::output::Measures;
-use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter};
+use crate::output::mcap::{ContinueFrom, Continued, McapSettings, TrajectoryWriter, WriteError};
 use crate::sample::{self, SampleError};
 use crate::scenario::Scenario;
 use checkpoint::{AnyCheckpoint, Checkpoint, CheckpointError};
@@ -247,11 +247,12 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
 /// the output directory has no `macro.csv` but `checkpoint_path`'s directory has one, it is
 /// copied first.
 ///
-/// An MCAP log (SDEM runs only) (`options.mcap`) is continued when its file exists: the frames written up to the
+/// An MCAP log (`options.mcap`) is continued when its file exists: the frames written up to the
 /// checkpoint are read back from it (finished or left unfinished by a killed process) and the
 /// run goes on after them in a temporary file that replaces it (see
-/// [`TrajectoryWriter::continue_log`]), so that it ends up holding exactly the frames of the
-/// uninterrupted run. When the file does not exist, a new log holds the continued part only.
+/// [`TrajectoryWriter::continue_log`], and [`TrajectoryWriter::continue_contours`] for the log
+/// of a meshfree run), so that it ends up holding exactly the frames of the uninterrupted run.
+/// When the file does not exist, a new log holds the continued part only.
 pub fn resume_run<C: Resumable + ?Sized>(
     checkpoint: &C,
     checkpoint_path: &Path,
@@ -400,19 +401,20 @@ pub fn run_loop<S: Simulation>(
     run.finish(&sim, &program, &state)
 }
 
-/// Opens the MCAP log of a run: a new one, or for a resumed run (`continue_from`) the existing
-/// log continued from the checkpoint (a new one holding the continued part when the file does
-/// not exist; both cases are reported on stderr).
+/// Opens the MCAP log of a run at `settings.path`: a new one (`create`), or for a resumed run
+/// (`continue_from`) the existing log continued from the checkpoint (`continue_log`; a new one
+/// holding the continued part when the file does not exist; both cases are reported on
+/// stderr). Each solver gives its own ways to create and to continue its kind of log.
 pub(crate) fn open_log(
     settings: &McapSettings,
-    scenario: &Scenario,
-    world: &World,
     continue_from: Option<ContinueFrom>,
+    create: impl FnOnce() -> Result<TrajectoryWriter, WriteError>,
+    continue_log: impl FnOnce(ContinueFrom) -> Result<(TrajectoryWriter, Continued), WriteError>,
 ) -> Result<TrajectoryWriter, RunError> {
     let path = &settings.path;
-    let created = |e: crate::output::mcap::WriteError| io_error(path)(e.into());
+    let created = |e: WriteError| io_error(path)(e.into());
     let Some(from) = continue_from else {
-        return TrajectoryWriter::create(settings, scenario, world).map_err(created);
+        return create().map_err(created);
     };
     if !path.exists() {
         eprintln!(
@@ -421,10 +423,9 @@ pub(crate) fn open_log(
             path.display(),
             from.step
         );
-        return TrajectoryWriter::create(settings, scenario, world).map_err(created);
+        return create().map_err(created);
     }
-    let (log, c) = TrajectoryWriter::continue_log(settings, scenario, world, from)
-        .map_err(|e| RunError::Resume(e.to_string()))?;
+    let (log, c) = continue_log(from).map_err(|e| RunError::Resume(e.to_string()))?;
     eprintln!(
         "sdem: continuing the MCAP log {}: {} frames up to step {} kept, {} after it dropped \
          ({}); written to {} until it replaces the log",

@@ -174,7 +174,12 @@ impl Simulation for Sdem {
         scenario: &Scenario,
         continue_from: Option<ContinueFrom>,
     ) -> Result<TrajectoryWriter, RunError> {
-        open_log(settings, scenario, &self.world, continue_from)
+        open_log(
+            settings,
+            continue_from,
+            || TrajectoryWriter::create(settings, scenario, &self.world),
+            |from| TrajectoryWriter::continue_log(settings, scenario, &self.world, from),
+        )
     }
 
     fn write_frame(&self, log: &mut TrajectoryWriter, row: &Measures) -> Result<(), WriteError> {

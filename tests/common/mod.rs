@@ -1,7 +1,9 @@
 //! Scaffolding shared by the integration tests that run, stop and resume small compactions;
-//! [`meshfree`]: the stacked-disc column of the multibody meshfree tests.
+//! [`meshfree`]: the stacked-disc column of the multibody meshfree tests; [`mcap`]: logs
+//! compared message for message.
 #![allow(dead_code)] // each test binary uses its own subset
 
+pub mod mcap;
 pub mod meshfree;
 
 use sdem::grain::Grain;
@@ -29,6 +31,35 @@ Scenario(
 /// [`SMALL_COMPACTION`], parsed and validated.
 pub fn small_compaction() -> Scenario {
     let s = Scenario::parse(SMALL_COMPACTION, "small.ron").unwrap();
+    s.validate().unwrap();
+    s
+}
+
+/// 4 coarse meshfree discs (16 boundary nodes), 16 steps: an isotropic compression with the
+/// walls against the grains from the first step, then a servo phase (its wall velocities come
+/// from the wall stresses of the step before, so the contact elements of the last step must be
+/// restored exactly), the first grain-grain contacts near its end. A `macro.csv` row (and an
+/// MCAP frame) every 2 steps and at jamming; well under 0.1 s a step in release.
+pub const MESHFREE_FOUR: &str = r#"
+Scenario(
+    name: "mf_ckpt",
+    seed: 3,
+    sample: (count: 4, box_width: 0.34, box_height: 0.34,
+             radii: Uniform(min: 0.06, max: 0.07)),
+    material: (young: 1.0, poisson: 0.3, density: 1.0),
+    model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0)),
+    time_step: Fixed(0.01),
+    loading: [
+        Isotropic(rate: Constant(2.0), until: PackingFraction(0.6)),
+        Servo(sxx: 0.1, syy: 0.1, gain: 0.5, max_rate: 2.0, until: Steps(100)),
+    ],
+    output: (every: 2, max_steps: 16),
+)
+"#;
+
+/// [`MESHFREE_FOUR`], parsed and validated.
+pub fn meshfree_four() -> Scenario {
+    let s = Scenario::parse(MESHFREE_FOUR, "mf_ckpt.ron").unwrap();
     s.validate().unwrap();
     s
 }

@@ -11,8 +11,9 @@
 
 use super::{
     Bodies, CdrReader, CdrResult, CdrWriter, IDENTITY_POSE, McapSettings, RunInfo,
-    TrajectoryWriter, WriteError, add_channel, encode_box, json_line_loop, json_point,
-    length_decimals, scene_grains_start, scene_schema, stress_colour, stress_colour_max,
+    TrajectoryWriter, WithPreamble, WriteError, add_channel, encode_box, json_line_loop,
+    json_point, length_decimals, scene_grains_start, scene_schema, stress_colour,
+    stress_colour_max,
 };
 use crate::boundary::walls::Wall;
 use crate::output::measures::Measures;
@@ -227,6 +228,16 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         info: &ContourLogInfo,
     ) -> Result<Self, WriteError> {
+        Ok(Self::create_contours_with_preamble(settings, scenario, info)?.0)
+    }
+
+    /// [`TrajectoryWriter::create_contours`], also returning the `sdem.run` metadata and the
+    /// scenario attachment it wrote.
+    pub(super) fn create_contours_with_preamble(
+        settings: &McapSettings,
+        scenario: &Scenario,
+        info: &ContourLogInfo,
+    ) -> Result<WithPreamble, WriteError> {
         let info = RunInfo {
             grains: info.grains,
             material: &scenario.material,
@@ -239,7 +250,7 @@ impl TrajectoryWriter {
                 ("boundary_nodes", info.boundary_nodes.to_string()),
             ],
         };
-        let (writer, _, _) = Self::create_log(
+        Self::create_log(
             settings,
             scenario,
             CONTOUR_SCENE_SCHEMA,
@@ -256,8 +267,7 @@ impl TrajectoryWriter {
                 )?;
                 Ok(Bodies::Contours { contours })
             },
-        )?;
-        Ok(writer)
+        )
     }
 
     /// Logs a meshfree state: its grains' contours, the walls and the `macro.csv` row, at

@@ -7,21 +7,23 @@
 //! goes on writing into that file, which replaces the old log at the first checkpoint or when
 //! the log is finished. The result holds exactly the messages of the uninterrupted run.
 //!
-//! A frame is identified by the `step` of its `/grains` message: the frames of the checkpoint
-//! are those with `step <= checkpoint.step` (frames are written in step order, at most one per
-//! step), and there must be exactly as many as the checkpoint's `macro.csv` rows. Every message
-//! of those frames (they share the frame's log time) is kept; everything after them is dropped.
+//! A frame is identified by the `step` of its `/grains` message (`/contours` in the log of a
+//! meshfree run): the frames of the checkpoint are those with `step <= checkpoint.step` (frames
+//! are written in step order, at most one per step), and there must be exactly as many as the
+//! checkpoint's `macro.csv` rows. Every message of those frames (they share the frame's log
+//! time) is kept; everything after them is dropped.
 
+use super::contours::{ContourLogInfo, TOPIC_CONTOURS};
 use super::{
     TOPIC_CONTACTS, TOPIC_GRAINS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, TrajectoryWriter,
-    WriteError,
+    WithPreamble, WriteError,
 };
 use crate::integration::World;
 use crate::output::mcap::McapSettings;
 use crate::scenario::Scenario;
 use mcap::records::{MessageHeader, Record};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -34,7 +36,8 @@ pub struct ContinueFrom {
     pub frames: u64,
 }
 
-/// What [`TrajectoryWriter::continue_log`] found in the log it continues.
+/// What [`TrajectoryWriter::continue_log`] (or [`TrajectoryWriter::continue_contours`]) found
+/// in the log it continues.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Continued {
     /// Frames kept (those of the checkpoint).
@@ -70,7 +73,8 @@ pub struct LogScan {
     pub metadata: BTreeMap<String, BTreeMap<String, String>>,
     /// Log times of the messages of each channel, in file order.
     pub messages: BTreeMap<u16, Vec<u64>>,
-    /// The frames: (log time, step) of each `/grains` message, in file order.
+    /// The frames: (log time, step) of each message of the frame channel, in file order: the
+    /// first `/grains` (SDEM) or `/contours` (meshfree) channel of the log.
     pub frames: Vec<(u64, u64)>,
     /// Whether the footer was reached (a finished log).
     pub finished: bool,
@@ -119,7 +123,7 @@ pub fn scan_log(
     );
     let mut scan = LogScan::default();
     let mut schemas: BTreeMap<u16, (String, String, Vec<u8>)> = BTreeMap::new();
-    let mut grains_channel: Option<u16> = None;
+    let mut frame_channel: Option<(u16, &str)> = None;
     let mut read_bytes = 8u64;
     let mut messages_read = 0u64;
     while let Some(event) = reader.next_event() {
@@ -156,8 +160,11 @@ pub fn scan_log(
             Record::Channel(c) => {
                 let (schema_name, schema_encoding, schema_data) =
                     schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                if c.topic == TOPIC_GRAINS {
-                    grains_channel = Some(c.id);
+                if frame_channel.is_none() {
+                    frame_channel = [TOPIC_GRAINS, TOPIC_CONTOURS]
+                        .into_iter()
+                        .find(|&t| c.topic == t)
+                        .map(|t| (c.id, t));
                 }
                 scan.channels.insert(
                     c.id,
@@ -178,13 +185,14 @@ pub fn scan_log(
             }
             Record::Message { header, data } => {
                 messages_read += 1;
-                if Some(header.channel_id) == grains_channel {
-                    // The step is the first field of `/grains` (after the CDR header).
+                if let Some((_, topic)) = frame_channel.filter(|&(id, _)| id == header.channel_id) {
+                    // The step is the first field of `/grains` and of `/contours` (after the
+                    // CDR header).
                     let Some(step) = data.get(4..12) else {
                         return Err(WriteError::Continue {
                             path: name,
                             reason: format!(
-                                "a {TOPIC_GRAINS} message at log time {} is too short",
+                                "a {topic} message at log time {} is too short",
                                 header.log_time
                             ),
                         });
@@ -208,8 +216,8 @@ pub fn scan_log(
 }
 
 impl TrajectoryWriter {
-    /// Continues the log at `settings.path` from a checkpoint: reads back every message of the
-    /// `from.frames` frames written up to step `from.step` (the old log may be unfinished),
+    /// Continues the SDEM log at `settings.path` from a checkpoint: reads back every message of
+    /// the `from.frames` frames written up to step `from.step` (the old log may be unfinished),
     /// writes them into `<path>.resume.tmp` after the same header, channels, scenario and
     /// `sdem.run` metadata, and returns a writer that goes on from there. The temporary file
     /// replaces the old log at the first [`TrajectoryWriter::sync`] or at
@@ -224,6 +232,37 @@ impl TrajectoryWriter {
         scenario: &Scenario,
         world: &World,
         from: ContinueFrom,
+    ) -> Result<(Self, Continued), WriteError> {
+        Self::continue_with(
+            settings,
+            from,
+            &[TOPIC_GRAINS, TOPIC_CONTACTS],
+            |settings| Self::create_with_preamble(settings, scenario, world),
+        )
+    }
+
+    /// [`TrajectoryWriter::continue_log`] for the log of a meshfree run, as
+    /// [`TrajectoryWriter::create_contours`] creates it: its frames are identified by the step
+    /// of their `/contours` message, which takes the place of `/grains` and `/contacts`.
+    pub fn continue_contours(
+        settings: &McapSettings,
+        scenario: &Scenario,
+        info: &ContourLogInfo,
+        from: ContinueFrom,
+    ) -> Result<(Self, Continued), WriteError> {
+        Self::continue_with(settings, from, &[TOPIC_CONTOURS], |settings| {
+            Self::create_contours_with_preamble(settings, scenario, info)
+        })
+    }
+
+    /// Continues a log whose grains are on the channels `bodies` (the first one identifies the
+    /// frames by its step): `create` writes the preamble of this run into the temporary file it
+    /// is given the settings of, and the old log's must be the same.
+    fn continue_with(
+        settings: &McapSettings,
+        from: ContinueFrom,
+        bodies: &[&'static str],
+        create: impl FnOnce(&McapSettings) -> Result<WithPreamble, WriteError>,
     ) -> Result<(Self, Continued), WriteError> {
         let path = &settings.path;
         let name = path.display().to_string();
@@ -244,9 +283,10 @@ impl TrajectoryWriter {
                 stopped()
             )));
         };
-        if scan.channel_id(TOPIC_GRAINS).is_none() {
+        if scan.channel_id(bodies[0]).is_none() {
             return Err(fail(format!(
-                "no {TOPIC_GRAINS} channel can be read{}",
+                "no {} channel can be read{}",
+                bodies[0],
                 stopped()
             )));
         }
@@ -298,8 +338,7 @@ impl TrajectoryWriter {
             path: temporary.clone(),
             scene_every: scene_every.or(settings.scene_every),
         };
-        let (mut writer, new_run, scenario_text) =
-            Self::create_with_preamble(&tmp_settings, scenario, world)?;
+        let (mut writer, new_run, scenario_text) = create(&tmp_settings)?;
         let mismatch = |what: String| {
             std::fs::remove_file(&temporary).ok();
             fail(format!(
@@ -311,6 +350,8 @@ impl TrajectoryWriter {
             let keys: Vec<String> = run
                 .keys()
                 .chain(new_run.keys())
+                .collect::<BTreeSet<_>>()
+                .into_iter()
                 .filter(|k| run.get(*k) != new_run.get(*k))
                 .map(|k| {
                     format!(
@@ -359,13 +400,16 @@ impl TrajectoryWriter {
             0 => 0,
             k => kept.div_ceil(k),
         };
-        for (topic, want) in [
-            (TOPIC_GRAINS, kept),
-            (TOPIC_CONTACTS, kept),
-            (TOPIC_WALLS, kept),
-            (TOPIC_MACRO, kept),
-            (TOPIC_SCENE, scenes),
-        ] {
+        let expected: Vec<(&str, u64)> = bodies
+            .iter()
+            .map(|&topic| (topic, kept))
+            .chain([
+                (TOPIC_WALLS, kept),
+                (TOPIC_MACRO, kept),
+                (TOPIC_SCENE, scenes),
+            ])
+            .collect();
+        for &(topic, want) in &expected {
             let have = upto(topic);
             if have != want {
                 std::fs::remove_file(&temporary).ok();
@@ -394,16 +438,7 @@ impl TrajectoryWriter {
                 Ok(true)
             })?;
         }
-        let want: u64 = [
-            TOPIC_GRAINS,
-            TOPIC_CONTACTS,
-            TOPIC_WALLS,
-            TOPIC_MACRO,
-            TOPIC_SCENE,
-        ]
-        .iter()
-        .map(|t| upto(t))
-        .sum();
+        let want: u64 = expected.iter().map(|&(_, n)| n).sum();
         if copied != want {
             std::fs::remove_file(&temporary).ok();
             return Err(fail(format!(
