@@ -267,23 +267,29 @@ fn damaged_meshfree_checkpoints_are_refused_with_a_clear_error() {
     eprintln!("fuzz: 300 damaged payloads, {decoded} still decoded");
 }
 
-/// A scenario that reads its discs from a sample file: the checkpoint holds them, and the run
-/// resumes bitwise after the file is gone.
-#[test]
-fn a_meshfree_run_from_a_sample_file_resumes_bitwise_without_the_file() {
-    let base = temp_dir("file");
-    std::fs::write(
-        base.join("discs.csv"),
-        "0.09,0.09,0.07\n0.25,0.1,0.065\n0.17,0.25,0.06\n",
-    )
-    .unwrap();
-    let text = SCENARIO
+/// Runs [`SCENARIO`] with its sample line replaced by `sample` (which reads `file`, written
+/// with `content` into a fresh folder) and the other replacements `edits`, uninterrupted and
+/// stopped at step 5; deletes the file, resumes the stopped run and checks it against the
+/// uninterrupted one byte for byte.
+fn resumes_bitwise_without_its_file(
+    name: &str,
+    file: &str,
+    content: &str,
+    sample: &str,
+    edits: &[(&str, &str)],
+) {
+    let base = temp_dir(name);
+    std::fs::write(base.join(file), content).unwrap();
+    let mut text = SCENARIO
         .replace(
             "count: 4, box_width: 0.34, box_height: 0.34,\n             radii: Uniform(min: 0.06, max: 0.07)",
-            "box_width: 0.34, box_height: 0.34, file: \"discs.csv\"",
+            sample,
         )
         .replace("max_steps: 16", "max_steps: 8");
-    assert!(text.contains("discs.csv"));
+    for (from, to) in edits {
+        text = text.replace(from, to);
+    }
+    assert!(text.contains(file));
     std::fs::write(base.join("s.ron"), text).unwrap();
     let (scenario, _) = Scenario::load(&base.join("s.ron")).unwrap();
     let reference = base.join("ref");
@@ -295,9 +301,39 @@ fn a_meshfree_run_from_a_sample_file_resumes_bitwise_without_the_file() {
         run_scenario(&scenario, &options),
         Err(RunError::Interrupted { step: 5, .. })
     ));
-    std::fs::remove_file(base.join("discs.csv")).unwrap();
+    std::fs::remove_file(base.join(file)).unwrap();
     let path = dir.join("checkpoint.bin");
     let c = AnyCheckpoint::read(&path).unwrap();
     resume_run(&c, &path, &common::checkpointed(&dir, EVERY)).unwrap();
     assert_same_files(&reference, &dir);
+}
+
+/// A scenario that reads its discs from a sample file: the checkpoint holds them, and the run
+/// resumes bitwise after the file is gone.
+#[test]
+fn a_meshfree_run_from_a_sample_file_resumes_bitwise_without_the_file() {
+    resumes_bitwise_without_its_file(
+        "file",
+        "discs.csv",
+        "0.09,0.09,0.07\n0.25,0.1,0.065\n0.17,0.25,0.06\n",
+        "box_width: 0.34, box_height: 0.34, file: \"discs.csv\"",
+        &[],
+    );
+}
+
+/// A scenario that reads its grains' contours from a shape file: the checkpoint holds them,
+/// and the run resumes bitwise after the file is gone.
+#[test]
+fn a_meshfree_run_from_a_shape_file_resumes_bitwise_without_the_file() {
+    resumes_bitwise_without_its_file(
+        "shapes",
+        "grains.shapes",
+        // Three squares of side 0.12, apart from each other and from the walls.
+        "grain a\n0.04 0.04\n0.16 0.04\n0.16 0.16\n0.04 0.16\n\
+         grain b\n0.19 0.04\n0.31 0.04\n0.31 0.16\n0.19 0.16\n\
+         grain c\n0.1 0.19\n0.22 0.19\n0.22 0.31\n0.1 0.31\n",
+        "box_width: 0.34, box_height: 0.34, shapes: File(\"grains.shapes\")",
+        // A square's interior takes fewer nodes than a disc's: 24 on the contour are enough.
+        &[("boundary_nodes: 16", "boundary_nodes: 24")],
+    );
 }

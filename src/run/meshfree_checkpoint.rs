@@ -28,9 +28,10 @@ use crate::meshfree::assembly::{
     Assembly, AssemblyState, ContactElement, ContactKey, ContactMultipliers, Evaluation, Master,
     StepStats,
 };
+use crate::meshfree::shape::{FourierMode, StarShape};
 use crate::meshfree::solver::SolveStats;
 use crate::output::MacroWriter;
-use crate::scenario::{LoadedSample, Scenario};
+use crate::scenario::{GrainShapes, LoadedSample, LoadedShapes, Scenario};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -232,6 +233,83 @@ impl EvaluationBits {
     }
 }
 
+/// A grain of a shape file: its centre and contour, floats as bits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ShapeBits {
+    Disc {
+        centre: [Bits; 2],
+        radius: Bits,
+    },
+    /// Modes as `(n, amplitude, phase)`.
+    Fourier {
+        centre: [Bits; 2],
+        r0: Bits,
+        modes: Vec<(u32, Bits, Bits)>,
+    },
+    Polygon {
+        centre: [Bits; 2],
+        vertices: Vec<[Bits; 2]>,
+    },
+}
+
+impl From<&([f64; 2], StarShape)> for ShapeBits {
+    fn from((c, shape): &([f64; 2], StarShape)) -> Self {
+        let centre = c.map(Bits::from);
+        match shape {
+            StarShape::Disc { radius } => ShapeBits::Disc {
+                centre,
+                radius: (*radius).into(),
+            },
+            StarShape::Fourier { r0, modes } => ShapeBits::Fourier {
+                centre,
+                r0: (*r0).into(),
+                modes: modes
+                    .iter()
+                    .map(|m| (m.n, m.amplitude.into(), m.phase.into()))
+                    .collect(),
+            },
+            StarShape::Polygon { vertices } => ShapeBits::Polygon {
+                centre,
+                vertices: vertices.iter().map(|v| v.map(Bits::from)).collect(),
+            },
+        }
+    }
+}
+
+impl ShapeBits {
+    fn to_grain(&self) -> ([f64; 2], StarShape) {
+        let point = |p: &[Bits; 2]| p.map(f64::from);
+        match self {
+            ShapeBits::Disc { centre, radius } => (
+                point(centre),
+                StarShape::Disc {
+                    radius: (*radius).into(),
+                },
+            ),
+            ShapeBits::Fourier { centre, r0, modes } => (
+                point(centre),
+                StarShape::Fourier {
+                    r0: (*r0).into(),
+                    modes: modes
+                        .iter()
+                        .map(|&(n, amplitude, phase)| FourierMode {
+                            n,
+                            amplitude: amplitude.into(),
+                            phase: phase.into(),
+                        })
+                        .collect(),
+                },
+            ),
+            ShapeBits::Polygon { centre, vertices } => (
+                point(centre),
+                StarShape::Polygon {
+                    vertices: vertices.iter().map(point).collect(),
+                },
+            ),
+        }
+    }
+}
+
 /// [`StepStats`] with its floats as bits.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StatsBits {
@@ -268,6 +346,10 @@ pub struct MeshfreeStored {
     /// grains' models are rebuilt from them; the file is not read again).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sample: Vec<GrainBits>,
+    /// The grains of the shape file, as read at the start, when the scenario's shapes come
+    /// from one (rebuilt from them; the file is not read again).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub shapes: Vec<ShapeBits>,
     pub step: u64,
     pub state: StateBits,
     pub walls: Vec<WallBits>,
@@ -317,7 +399,12 @@ impl MeshfreeCheckpoint {
             (Some(_), Some(loaded)) => loaded.grains.iter().map(GrainBits::from).collect(),
             _ => Vec::new(),
         };
+        let shapes = match &self.scenario.sample.loaded_shapes {
+            Some(loaded) => loaded.grains.iter().map(ShapeBits::from).collect(),
+            None => Vec::new(),
+        };
         MeshfreeStored {
+            shapes,
             scenario: self.scenario.clone(),
             complete: self.complete,
             checkpoint_every: self.checkpoint_every,
@@ -373,6 +460,19 @@ impl MeshfreeCheckpoint {
             (Some(_), true) => return Err("no sample grains for a sample file".into()),
             (None, false) => return Err("sample grains without a sample file".into()),
             (None, true) => {}
+        }
+        match (&s.scenario.sample.shapes, s.shapes.is_empty()) {
+            (Some(GrainShapes::File(file)), false) => {
+                s.scenario.sample.loaded_shapes = Some(std::sync::Arc::new(LoadedShapes {
+                    path: file.clone(),
+                    grains: s.shapes.iter().map(ShapeBits::to_grain).collect(),
+                }));
+            }
+            (Some(GrainShapes::File(_)), true) => {
+                return Err("no grain shapes for a shape file".into());
+            }
+            (_, false) => return Err("grain shapes without a shape file".into()),
+            (_, true) => {}
         }
         if let Some(seconds) = s.checkpoint_seconds.map(f64::from)
             && !(seconds.is_finite() && seconds > 0.0)
