@@ -114,7 +114,12 @@ fn a_small_meshfree_run_writes_its_outputs() {
     let grains = std::fs::read_to_string(out_dir.join("grains.csv")).unwrap();
     assert_eq!(grains.lines().count(), 5, "{grains}");
     assert!(grains.starts_with("id,x,y,area,"));
-    assert!(out_dir.join("summary.txt").exists());
+    let summary = std::fs::read_to_string(out_dir.join("summary.txt")).unwrap();
+    // An implicit solver has no critical step (SDEM's formula would mean nothing here).
+    assert!(
+        summary.contains("critical_dt = none (implicit solver)"),
+        "{summary}"
+    );
     // `sdem check` describes the model.
     let check = sdem(&["check", path.to_str().unwrap()]);
     assert!(check.status.success());
@@ -153,15 +158,68 @@ fn too_few_nodes_for_the_supports_is_refused() {
     );
 }
 
+const IMPLICIT_MODEL: &str =
+    "model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0, gap_tolerance: 1e-4)),";
+
+#[test]
+fn an_explicit_meshfree_run_sub_steps_below_its_critical_step() {
+    let s = Scratch::new("explicit");
+    let path = s.write(
+        "scenario.ron",
+        &replaced(
+            IMPLICIT_MODEL,
+            "model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0, scheme: CentralDifference, \
+             k0: 10.0)),",
+        ),
+    );
+    let out_dir = s.0.join("out");
+    let out = run(&path, &out_dir);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = std::fs::read_to_string(out_dir.join("summary.txt")).unwrap();
+    let line = summary
+        .lines()
+        .find_map(|l| l.strip_prefix("critical_dt = "))
+        .unwrap_or_else(|| panic!("{summary}"));
+    let critical: f64 = line.parse().unwrap_or_else(|_| panic!("{line}"));
+    // Expectation: every step is cut into sub-steps of at most half the critical step, and
+    // no implicit solve happens.
+    let macro_csv = std::fs::read_to_string(out_dir.join("macro.csv")).unwrap();
+    let header: Vec<&str> = macro_csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for row in macro_csv.lines().skip(1) {
+        let r: Vec<&str> = row.split(',').collect();
+        let sub_steps: f64 = r[col("sub_steps")].parse().unwrap();
+        assert!(0.02 / sub_steps <= 0.5 * critical * (1.0 + 1e-12), "{row}");
+        assert_eq!(r[col("newton_iterations")], "0", "{row}");
+    }
+}
+
+#[test]
+fn stiffness_damping_with_the_explicit_scheme_is_refused() {
+    let e = failing(
+        "explicit_beta",
+        &replaced(
+            IMPLICIT_MODEL,
+            "model: Meshfree((boundary_nodes: 16, scheme: CentralDifference, \
+             rayleigh_beta: 0.01)),",
+        ),
+        &[],
+    );
+    assert!(
+        e.contains("rayleigh_beta") && e.contains("CentralDifference"),
+        "{e}"
+    );
+}
+
 #[test]
 fn gravity_with_an_sdem_model_is_refused() {
     let e = failing(
         "gravity",
-        &replaced(
-            "model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0, gap_tolerance: 1e-4)),",
-            "model: Full,\n    gravity: (0.0, -1.0),",
-        )
-        .replace(
+        &replaced(IMPLICIT_MODEL, "model: Full,\n    gravity: (0.0, -1.0),").replace(
             "time_step: Fixed(0.02)",
             "time_step: FractionOfCritical(0.4)",
         ),

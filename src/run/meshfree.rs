@@ -400,6 +400,10 @@ impl Simulation for Meshfree {
         self.step
     }
 
+    fn critical_dt(&self, _scenario: &Scenario) -> Option<f64> {
+        self.assembly.explicit_data().map(|x| x.critical_step)
+    }
+
     fn time(&self) -> f64 {
         self.state.time
     }

@@ -117,7 +117,9 @@ pub struct RunSummary {
     pub grains: usize,
     pub steps: u64,
     pub dt: f64,
-    pub critical_dt: f64,
+    /// The critical time step of the explicit integration (SDEM's, or the explicit meshfree
+    /// scheme's); `None` for the implicit meshfree schemes.
+    pub critical_dt: Option<f64>,
     pub wall_seconds: f64,
     pub jamming: Option<Jamming>,
     pub last: Measures,
@@ -474,7 +476,10 @@ pub(crate) fn write_summary(
     writeln!(f, "grains = {}", s.grains)?;
     writeln!(f, "steps = {}", s.steps)?;
     writeln!(f, "dt = {:.6e}", s.dt)?;
-    writeln!(f, "critical_dt = {:.6e}", s.critical_dt)?;
+    match s.critical_dt {
+        Some(dt) => writeln!(f, "critical_dt = {dt:.6e}")?,
+        None => writeln!(f, "critical_dt = none (implicit solver)")?,
+    }
     writeln!(f, "wall_seconds = {:.3}", s.wall_seconds)?;
     writeln!(
         f,

@@ -172,6 +172,12 @@ pub trait Simulation {
     fn statistics(&self) -> SolverStatistics {
         SolverStatistics::default()
     }
+
+    /// The critical time step of the solver's explicit integration, for the run summary
+    /// (`None`: the solver is implicit and has none). By default SDEM's, from the scenario.
+    fn critical_dt(&self, scenario: &Scenario) -> Option<f64> {
+        Some(scenario.critical_time_step())
+    }
 }
 
 /// Where the last good state of a failed run is, for [`Simulation::failure_error`].

@@ -480,7 +480,7 @@ impl<'a> Run<'a> {
             grains: sim.grain_count(),
             steps: sim.step_count(),
             dt: sim.dt(),
-            critical_dt: scenario.critical_time_step(),
+            critical_dt: sim.critical_dt(scenario),
             wall_seconds: self.started.elapsed().as_secs_f64(),
             jamming,
             last: std::mem::take(&mut self.last_row),
