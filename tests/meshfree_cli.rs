@@ -86,10 +86,11 @@ fn failing(test: &str, scenario: &str, files: &[(&str, &str)]) -> String {
     stderr
 }
 
-#[test]
-fn a_small_meshfree_run_writes_its_outputs() {
-    let s = Scratch::new("run");
-    let path = s.write("scenario.ron", BASE);
+/// Runs `scenario` in a fresh folder `test`, which must succeed; its `macro.csv`, `summary.txt`
+/// and output folder.
+fn succeeding(test: &str, scenario: &str) -> (String, String, Scratch) {
+    let s = Scratch::new(test);
+    let path = s.write("scenario.ron", scenario);
     let out_dir = s.0.join("out");
     let out = run(&path, &out_dir);
     assert!(
@@ -97,7 +98,14 @@ fn a_small_meshfree_run_writes_its_outputs() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let macro_csv = std::fs::read_to_string(out_dir.join("macro.csv")).unwrap();
+    let read = |name: &str| std::fs::read_to_string(out_dir.join(name)).unwrap();
+    (read("macro.csv"), read("summary.txt"), s)
+}
+
+#[test]
+fn a_small_meshfree_run_writes_its_outputs() {
+    let (macro_csv, summary, s) = succeeding("run", BASE);
+    let out_dir = s.0.join("out");
     let header = macro_csv.lines().next().unwrap();
     for column in [
         "phi",
@@ -114,13 +122,13 @@ fn a_small_meshfree_run_writes_its_outputs() {
     let grains = std::fs::read_to_string(out_dir.join("grains.csv")).unwrap();
     assert_eq!(grains.lines().count(), 5, "{grains}");
     assert!(grains.starts_with("id,x,y,area,"));
-    let summary = std::fs::read_to_string(out_dir.join("summary.txt")).unwrap();
     // An implicit solver has no critical step (SDEM's formula would mean nothing here).
     assert!(
         summary.contains("critical_dt = none (implicit solver)"),
         "{summary}"
     );
     // `sdem check` describes the model.
+    let path = s.0.join("scenario.ron");
     let check = sdem(&["check", path.to_str().unwrap()]);
     assert!(check.status.success());
     assert!(String::from_utf8_lossy(&check.stdout).contains("meshfree"));
@@ -163,23 +171,14 @@ const IMPLICIT_MODEL: &str =
 
 #[test]
 fn an_explicit_meshfree_run_sub_steps_below_its_critical_step() {
-    let s = Scratch::new("explicit");
-    let path = s.write(
-        "scenario.ron",
+    let (macro_csv, summary, _) = succeeding(
+        "explicit",
         &replaced(
             IMPLICIT_MODEL,
             "model: Meshfree((boundary_nodes: 16, rayleigh_alpha: 5.0, scheme: CentralDifference, \
              k0: 10.0)),",
         ),
     );
-    let out_dir = s.0.join("out");
-    let out = run(&path, &out_dir);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary = std::fs::read_to_string(out_dir.join("summary.txt")).unwrap();
     let line = summary
         .lines()
         .find_map(|l| l.strip_prefix("critical_dt = "))
@@ -187,7 +186,6 @@ fn an_explicit_meshfree_run_sub_steps_below_its_critical_step() {
     let critical: f64 = line.parse().unwrap_or_else(|_| panic!("{line}"));
     // Expectation: every step is cut into sub-steps of at most half the critical step, and
     // no implicit solve happens.
-    let macro_csv = std::fs::read_to_string(out_dir.join("macro.csv")).unwrap();
     let header: Vec<&str> = macro_csv.lines().next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     for row in macro_csv.lines().skip(1) {
