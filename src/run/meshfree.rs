@@ -235,16 +235,9 @@ impl Meshfree {
         .map_err(|e| RunError::Setup(format!("meshfree assembly: {e}")))?;
         assembly.min_sub_step = settings.min_sub_step;
         if settings.scheme == TimeScheme::CentralDifference {
-            if settings.rayleigh_beta != 0.0 {
-                return Err(RunError::Setup(
-                    "model.rayleigh_beta: the explicit scheme (CentralDifference) takes \
-                     mass-proportional damping only: set it to 0"
-                        .into(),
-                ));
-            }
             assembly
                 .use_explicit()
-                .map_err(|e| RunError::Setup(format!("meshfree explicit scheme: {e}")))?;
+                .map_err(|e| RunError::Setup(format!("model: {e}")))?;
         }
         let dt = match scenario.time_step {
             TimeStep::Fixed(dt) => dt,

@@ -84,9 +84,17 @@ fn largest_eigenvalue(model: &GrainModel, node_mass: &[f64]) -> Result<f64, Mesh
 }
 
 impl Assembly {
-    /// Prepares the explicit scheme (lumped mass, critical step); done once, before the
-    /// first explicit step.
+    /// Prepares the explicit scheme (lumped mass, critical step); computed once, before the
+    /// first explicit step. Fails when `rayleigh_beta` is not 0 (stiffness damping would need
+    /// `K_0 v` at every sub-step).
     pub fn use_explicit(&mut self) -> Result<&ExplicitData, MeshfreeError> {
+        if self.rayleigh.1 != 0.0 {
+            return Err(MeshfreeError::BadInput(
+                "rayleigh_beta: the explicit scheme (CentralDifference) takes mass-proportional \
+                 damping only: set it to 0"
+                    .into(),
+            ));
+        }
         if self.explicit.is_none() {
             let per_grain: Vec<(Vec<f64>, f64)> = self
                 .grains
@@ -187,17 +195,15 @@ impl Assembly {
         state: &mut AssemblyState,
         dt: f64,
     ) -> Result<(Evaluation, StepStats), MeshfreeError> {
-        if self.rayleigh.1 != 0.0 {
-            return Err(MeshfreeError::BadInput(
-                "the explicit scheme takes mass-proportional damping only (rayleigh_beta = 0)"
-                    .into(),
-            ));
-        }
-        let data = self.use_explicit()?.clone();
+        self.use_explicit()?;
+        // Taken out for the step (no copy of the lumped mass), put back whatever happens.
+        let data = self.explicit.take().expect("use_explicit set it");
         let sub_steps = (dt / data.sub_step()).ceil().max(1.0) as usize;
         let walls0 = self.walls.clone();
-        let max_penetration =
-            self.central_differences(state, &data, &walls0, dt / sub_steps as f64, sub_steps)?;
+        let advanced =
+            self.central_differences(state, &data, &walls0, dt / sub_steps as f64, sub_steps);
+        self.explicit = Some(data);
+        let max_penetration = advanced?;
         self.move_walls(&walls0, dt);
         let eval = self.evaluate(
             &state.u,
