@@ -449,17 +449,31 @@ fn adaptive_runs_are_deterministic_and_resume_bitwise() {
 #[test]
 fn a_run_without_level_columns_resumes_with_them() {
     // Expectation: a checkpoint and macro.csv of an sdem before the adaptive level (no level
-    // columns, no levels in the checkpoint) resume; the kept rows get the fixed level's counts
-    // and the result is the uninterrupted run.
+    // columns, no z_nr3, no levels in the checkpoint) resume; the kept rows get the fixed
+    // level's counts and z_nr3 = nan, and the result is otherwise the uninterrupted run.
+    resumes_an_older_macro_csv(4, sdem::output::Measures::HEADER_WITHOUT_LEVELS);
+}
+
+#[test]
+fn a_run_without_the_z_nr3_column_resumes_with_it() {
+    // Expectation: a macro.csv of an sdem before the 3-contact rattler rule resumes; its kept
+    // rows get z_nr3 = nan, and the result is otherwise the uninterrupted run.
+    resumes_an_older_macro_csv(1, sdem::output::Measures::HEADER_WITHOUT_Z_NR3);
+}
+
+/// Stops a run of the full model (its checkpoint has no levels, as one of an sdem before the
+/// adaptive level) at step 1500, cuts the last `columns` columns off its macro.csv (which must
+/// then start with `header`), resumes it and compares it with the uninterrupted run.
+fn resumes_an_older_macro_csv(columns: usize, header: &str) {
     let mut scenario = scenario();
     scenario.model = Model::Full;
     scenario.sample.count = Some(200);
     scenario.sample.box_width = 0.45;
     scenario.sample.box_height = 0.45;
     scenario.validate().unwrap();
-    let reference = temp_dir("legacy-ref");
+    let reference = temp_dir(&format!("legacy{columns}-ref"));
     run_scenario(&scenario, &options(&reference, 1_000_000_000)).unwrap();
-    let dir = temp_dir("legacy");
+    let dir = temp_dir(&format!("legacy{columns}"));
     let mut opts = options(&dir, 1_000_000_000);
     opts.stop_after_step = Some(1500);
     assert!(run_scenario(&scenario, &opts).is_err());
@@ -467,14 +481,37 @@ fn a_run_without_level_columns_resumes_with_them() {
     let old: String = std::fs::read_to_string(&path)
         .unwrap()
         .lines()
-        .map(|l| l.rsplitn(4, ',').last().unwrap().to_string() + "\n")
+        .map(|l| l.rsplitn(columns + 1, ',').last().unwrap().to_string() + "\n")
         .collect();
-    assert!(old.starts_with(sdem::output::Measures::HEADER_WITHOUT_LEVELS));
+    assert!(old.starts_with(&format!("{header}\n")));
+    let kept_rows = old.lines().count() - 1;
     std::fs::write(&path, old).unwrap();
     let checkpoint = dir.join("checkpoint.bin");
     let c = Checkpoint::read(&checkpoint).unwrap();
     assert!(c.runner.levels.is_empty());
     resume_run(&c, &checkpoint, &options(&dir, 1_000_000_000)).unwrap();
+    // z_nr3 (the last column) is nan in the rows kept from before, the reference's after them.
+    let split = |dir: &Path| -> Vec<(String, String)> {
+        std::fs::read_to_string(dir.join("macro.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let (rest, last) = l.rsplit_once(',').unwrap();
+                (rest.to_string(), last.to_string())
+            })
+            .collect()
+    };
+    let (resumed, uninterrupted) = (split(&dir), split(&reference));
+    assert_eq!(resumed.len(), uninterrupted.len());
+    for (k, (r, u)) in resumed.iter().zip(&uninterrupted).enumerate() {
+        assert_eq!(r.0, u.0, "row {k}");
+        if (1..=kept_rows).contains(&k) {
+            assert_eq!(r.1, "nan", "row {k}");
+        } else {
+            assert_eq!(r.1, u.1, "row {k}");
+        }
+    }
+    std::fs::copy(reference.join("macro.csv"), &path).unwrap();
     assert_same_run(&reference, &dir);
     assert!(level_rows(&dir).iter().all(|r| *r == [0, 0, 200]));
     for d in [reference, dir] {

@@ -34,7 +34,7 @@ fn small_isotropic_compaction_jams_and_reports() {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     for column in [
-        "step", "time", "phi", "sxx_c", "syy_c", "p_c", "q_c", "z", "z_nr",
+        "step", "time", "phi", "sxx_c", "syy_c", "p_c", "q_c", "z", "z_nr", "z_nr3",
     ] {
         assert!(header.contains(&column), "missing column {column}");
     }

@@ -299,4 +299,5 @@ def main():
         print(f"wrote {out / 'sweep.csv'}, {out / 'runs.csv'} and {out / 'sweep.svg'}")
 
 
-main()
+if __name__ == "__main__":
+    main()

@@ -24,6 +24,7 @@ use crate::geometry::{
 use crate::grain::adaptive::stress_invariants;
 use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
+use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
 
@@ -473,9 +474,11 @@ impl World {
             .for_each(|g| g.center = to_lo + (g.center - from_lo) * scale);
     }
 
-    /// Coordination numbers (z, z_nr) of the last step: `2C/N` over grain–grain contacts, and
-    /// the same over the grains with at least 2 contacts and the contacts between them.
-    pub fn coordination(&self) -> (f64, f64) {
+    /// Coordination numbers (z, z_nr, z_nr3) of the last step: `2C/N` over grain–grain
+    /// contacts; the same over the grains with at least 2 grain contacts and the contacts between
+    /// them; and the same without the rattlers of the 3-contact rule
+    /// ([`coordination_without_rattlers`]).
+    pub fn coordination(&self) -> (f64, f64, f64) {
         let n = self.grains.len().max(1) as f64;
         let z = 2.0 * self.totals.contacts as f64 / n;
         let carrying = |g: u32| self.grain_stress[g as usize].contacts >= 2;
@@ -492,7 +495,17 @@ impl World {
         } else {
             0.0
         };
-        (z, z_nr)
+        let wall_contacts: Vec<u32> = self.grain_stress.iter().map(|s| s.wall_contacts).collect();
+        let pairs: Vec<(u32, u32)> = self
+            .neighbors
+            .pairs
+            .iter()
+            .zip(&self.pair_contacts)
+            .filter(|(_, c)| c.active)
+            .map(|([i, j], _)| (*i, *j))
+            .collect();
+        let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
+        (z, z_nr, z_nr3)
     }
 }
 

@@ -183,6 +183,21 @@ impl Evaluation {
         (s, mag)
     }
 
+    /// Grain–wall pairs `(grain, wall)` with at least one active element between them, sorted.
+    pub fn wall_contacts(&self) -> Vec<(u32, u32)> {
+        let mut pairs: Vec<(u32, u32)> = self
+            .elements
+            .iter()
+            .filter_map(|e| match e.key.master {
+                Master::Wall(w) => Some((e.key.slave, w)),
+                Master::Grain(_) => None,
+            })
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        pairs
+    }
+
     /// Grain pairs `(i, j)`, `i < j`, with at least one active element between them (either
     /// pass), sorted.
     pub fn contact_pairs(&self) -> Vec<(u32, u32)> {

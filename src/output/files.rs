@@ -34,7 +34,8 @@ impl MacroWriter {
 
     /// [`MacroWriter::resume`], also accepting a `macro.csv` written before the level columns
     /// when `levels` (the grains at each level of a run without the adaptive level) is given:
-    /// its header and kept rows get the level columns.
+    /// its header and kept rows get the level columns. A `macro.csv` written before the
+    /// `z_nr3` column gets it too, `nan` in the kept rows (not measured then).
     pub fn resume_upgrading(
         path: &Path,
         rows: u64,
@@ -59,18 +60,28 @@ impl MacroWriter {
         let bytes = std::fs::read(path)?;
         let mut end = 0usize;
         let mut lines = 0u64;
-        let mut legacy = false;
+        // What the kept rows of an older macro.csv need appended to match the header.
+        let mut legacy_fill: Option<String> = None;
         while lines < rows + 1 {
             match bytes[end..].iter().position(|&b| b == b'\n') {
                 Some(k) => {
-                    if lines == 0 && &bytes[..end + k] != header.as_bytes() {
-                        legacy = levels.is_some()
-                            && &bytes[..end + k] == Measures::HEADER_WITHOUT_LEVELS.as_bytes();
-                        if !legacy {
-                            return Err(
-                                bad("not a macro.csv of this sdem (header differs)".into()),
-                            );
-                        }
+                    let first = &bytes[..end + k];
+                    if lines == 0 && first != header.as_bytes() {
+                        legacy_fill = match levels {
+                            Some(l) if first == Measures::HEADER_WITHOUT_LEVELS.as_bytes() => {
+                                Some(format!(",{},{},{},nan", l[0], l[1], l[2]))
+                            }
+                            _ if header == Measures::HEADER
+                                && first == Measures::HEADER_WITHOUT_Z_NR3.as_bytes() =>
+                            {
+                                Some(",nan".to_string())
+                            }
+                            _ => {
+                                return Err(bad(
+                                    "not a macro.csv of this sdem (header differs)".into()
+                                ));
+                            }
+                        };
                     }
                     end += k + 1;
                     lines += 1;
@@ -83,9 +94,8 @@ impl MacroWriter {
                 }
             }
         }
-        if let (true, Some(levels)) = (legacy, levels) {
+        if let Some(fill) = legacy_fill {
             let text = String::from_utf8_lossy(&bytes[..end]);
-            let fill = format!(",{},{},{}", levels[0], levels[1], levels[2]);
             let mut upgraded = String::with_capacity(end + (rows as usize + 1) * fill.len());
             for (k, line) in text.lines().enumerate() {
                 if k == 0 {

@@ -149,6 +149,7 @@ uint64 capped_contacts
 uint64 grains_rigid
 uint64 grains_volumetric
 uint64 grains_full
+float64 z_nr3
 ";
 
 /// The subset of Foxglove's `foxglove.SceneUpdate` JSON schema that a `/scene` uses, as a
@@ -350,6 +351,11 @@ impl<'a> CdrReader<'a> {
 
     fn align(&mut self, n: usize) {
         self.pos += (n - (self.pos - 4) % n) % n;
+    }
+
+    /// Bytes left after the current position.
+    fn remaining(&self) -> usize {
+        self.data.len().saturating_sub(self.pos)
     }
 
     fn take(&mut self, n: usize) -> CdrResult<&'a [u8]> {
@@ -687,6 +693,7 @@ fn encode_macro(buf: &mut Vec<u8>, m: &Measures) {
     for n in m.levels {
         w.u64(n);
     }
+    w.f64(m.z_nr3);
 }
 
 fn decode_macro(data: &[u8]) -> CdrResult<Measures> {
@@ -711,6 +718,12 @@ fn decode_macro(data: &[u8]) -> CdrResult<Measures> {
         contacts: r.u64()?,
         capped_contacts: r.u64()?,
         levels: [r.u64()?, r.u64()?, r.u64()?],
+        // Logs written before the column end here.
+        z_nr3: if r.remaining() > 0 {
+            r.f64()?
+        } else {
+            f64::NAN
+        },
     })
 }
 
@@ -2207,8 +2220,19 @@ mod tests {
         let mut buf = Vec::new();
         encode_macro(&mut buf, &m);
         assert_eq!(decode_macro(&buf).unwrap(), m);
-        // Truncated anywhere: an error, not a panic.
-        for cut in 0..buf.len() {
+        // A message of a log written before z_nr3 ends just before it: read, z_nr3 unknown.
+        let old_end = buf.len() - 8;
+        let old = decode_macro(&buf[..old_end]).unwrap();
+        assert!(old.z_nr3.is_nan());
+        assert_eq!(
+            Measures {
+                z_nr3: m.z_nr3,
+                ..old
+            },
+            m
+        );
+        // Truncated anywhere else: an error, not a panic.
+        for cut in (0..buf.len()).filter(|&cut| cut != old_end) {
             assert!(decode_macro(&buf[..cut]).is_err());
         }
     }

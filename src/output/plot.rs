@@ -100,6 +100,7 @@ pub fn read_macro_csv(path: &Path) -> Result<Vec<Measures>, String> {
             q_c: float("q_c")?,
             z: float("z")?,
             z_nr: float("z_nr")?,
+            z_nr3: float("z_nr3")?,
             kinetic_energy: float("kinetic_energy")?,
             elastic_energy: float("elastic_energy")?,
             inertial_number: float("inertial_number")?,

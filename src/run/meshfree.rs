@@ -30,6 +30,7 @@ use crate::output::Measures;
 use crate::output::mcap::{
     ContinueFrom, ContourLogInfo, FrameContour, McapSettings, TrajectoryWriter, WriteError,
 };
+use crate::output::measures::coordination_without_rattlers;
 use crate::sample;
 use crate::scenario::{GrainShapes, MeshfreeSettings, Scenario, TimeStep};
 
@@ -440,7 +441,7 @@ impl Simulation for Meshfree {
 
     fn measures(&self, phase: &str, strain_rate: f64) -> Measures {
         let (phi, sxx_c, syy_c, box_width, box_height) = self.box_state();
-        let (z, z_nr) = self.coordination();
+        let (z, z_nr, z_nr3) = self.coordination();
         let state = self.load_state(true);
         Measures {
             step: self.step,
@@ -453,6 +454,7 @@ impl Simulation for Meshfree {
             q_c: 0.5 * (sxx_c - syy_c),
             z,
             z_nr,
+            z_nr3,
             kinetic_energy: self.assembly.kinetic_energy(&self.state.v),
             elastic_energy: self.last.elastic_energy,
             inertial_number: state.inertial_number(strain_rate),
@@ -465,7 +467,7 @@ impl Simulation for Meshfree {
         }
     }
 
-    fn coordination(&self) -> (f64, f64) {
+    fn coordination(&self) -> (f64, f64, f64) {
         let pairs = self.last.contact_pairs();
         let n = self.assembly.grains.len().max(1) as f64;
         let per_grain = self.contacts_per_grain();
@@ -480,7 +482,12 @@ impl Simulation for Meshfree {
         } else {
             0.0
         };
-        (2.0 * pairs.len() as f64 / n, z_nr)
+        let mut wall_contacts = vec![0u32; self.assembly.grains.len()];
+        for (g, _) in self.last.wall_contacts() {
+            wall_contacts[g as usize] += 1;
+        }
+        let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
+        (2.0 * pairs.len() as f64 / n, z_nr, z_nr3)
     }
 
     fn contacts(&self) -> u64 {

@@ -119,7 +119,7 @@ impl Simulation for Sdem {
         Measures::of(&self.world, phase, strain_rate, self.mean_diameter)
     }
 
-    fn coordination(&self) -> (f64, f64) {
+    fn coordination(&self) -> (f64, f64, f64) {
         self.world.coordination()
     }
 

@@ -108,8 +108,9 @@ pub trait Simulation {
     /// The `macro.csv` row of the current state.
     fn measures(&self, phase: &str, strain_rate: f64) -> Measures;
 
-    /// Coordination numbers `(z, z_nr)`: over all grains, and without the rattlers.
-    fn coordination(&self) -> (f64, f64);
+    /// Coordination numbers `(z, z_nr, z_nr3)`: over all grains, without the rattlers (fewer
+    /// than 2 contacts), and without the rattlers of the 3-contact rule (SPEC §7).
+    fn coordination(&self) -> (f64, f64, f64);
 
     /// Active grain–grain contacts (for progress reports).
     fn contacts(&self) -> u64;
@@ -301,8 +302,8 @@ mod tests {
                 ..Default::default()
             }
         }
-        fn coordination(&self) -> (f64, f64) {
-            (4.0, 4.0)
+        fn coordination(&self) -> (f64, f64, f64) {
+            (4.0, 4.0, 4.0)
         }
         fn contacts(&self) -> u64 {
             0

@@ -269,7 +269,7 @@ impl<'a> Run<'a> {
         let step = sim.step_count();
         match state.candidate {
             None if p_c > self.p_jam => {
-                let (z, z_nr) = sim.coordination();
+                let (z, z_nr, _) = sim.coordination();
                 state.candidate = Some(Jamming {
                     step,
                     phi: load.phi,
