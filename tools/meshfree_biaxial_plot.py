@@ -23,10 +23,13 @@ def read(path):
         return list(csv.DictReader(f))
 
 
-def panel(x0, y0, w, h, xs_list, ys_list, colours, labels, xlabel, ylabel, title, dashes=None):
+def panel(x0, y0, w, h, xs_list, ys_list, colours, labels, xlabel, ylabel, title, dashes=None,
+          from_zero=True):
+    """A line chart; the y axis starts at 0 (or below) unless `from_zero` is false."""
     lo_x = min(min(xs) for xs in xs_list)
     hi_x = max(max(xs) for xs in xs_list)
-    lo_y = min(0.0, min(min(ys) for ys in ys_list))
+    lo_y = min(min(ys) for ys in ys_list)
+    lo_y = min(0.0, lo_y) if from_zero else lo_y
     hi_y = max(max(ys) for ys in ys_list) * 1.05 or 1.0
     sx = lambda x: x0 + (x - lo_x) / ((hi_x - lo_x) or 1.0) * w
     sy = lambda y: y0 + h - (y - lo_y) / ((hi_y - lo_y) or 1.0) * h

@@ -21,9 +21,8 @@ One packing, two solvers, the same walls, loading and material:
    For nu = 0.3 and for (nearly) incompressible grains: SDEM at nu = 0.5 (with its
    incompressibility correction), the meshfree solver at nu = 0.45 (`NU_MESHFREE_HIGH`).
 3. The meshfree reference: the explicit scheme (lumped mass, central differences, penalty
-   contacts k0 = 30 E / R), neo-Hookean grains, at several nodal densities (`DENSITIES`, boundary
-   nodes per grain) for the convergence check; the finest density run for a case is its
-   reference.
+   contacts), neo-Hookean grains, at two nodal densities and two penalties (`MESHFREE_RUNS`) for
+   the convergence checks; the stiffest penalty's finest run of a case is its reference.
 4. The SDEM settings (`SDEM_VARIANTS`): model level, contour resolution, time step and contact
    law (the paper's a = 0.58, b = 2; the single-grain calibration `sdem calibrate`; and the pair
    fitted to the reference itself, `--fit`).
@@ -60,8 +59,21 @@ PHI_START = 0.77
 SHRINK = 0.999
 NU_MESHFREE_HIGH = 0.45
 # Boundary nodes per grain of the meshfree runs; the last is the reference.
-DENSITIES = [24, 32]
-MESHFREE_K0 = 30.0
+# The meshfree runs: (case, meshfree nu, boundary nodes per grain, penalty k0 in E / R). The
+# reference of a case is its run with the stiffest penalty, then the most nodes; the others
+# measure the convergence in nodal density (same k0) and in penalty (same nodes). The penalty
+# sets the explicit step (k0 = 300: half the step of k0 = 30), so the oedometric cases, the
+# longest, are run at k0 = 30 only, and their penalty error is the one measured on the
+# isotropic case (docs/sdem_vs_meshfree.md).
+MESHFREE_RUNS = [
+    ("isotropic", NU_MESHFREE_HIGH, 32, 300),
+    ("isotropic", 0.3, 32, 300),
+    ("isotropic", NU_MESHFREE_HIGH, 24, 300),
+    ("isotropic", 0.3, 24, 300),
+    ("isotropic", 0.3, 32, 30),
+    ("oedometric", NU_MESHFREE_HIGH, 32, 30),
+    ("oedometric", 0.3, 32, 30),
+]
 MESHFREE_GRADING = 3.0
 # Mass-proportional damping of the meshfree grains (1/time): slow enough that the drag of the
 # affine motion is below 1e-5 E on the walls, fast enough to damp the grains' vibrations.
@@ -184,21 +196,20 @@ def loading_program(case, rate, phi_start, phi_j, phi_end):
             f"        Oedometric(rate: Constant({rate}), until: Strain({1.0 - phi_j / phi_end:.6f})),")
 
 
+def meshfree_name(case, nu, nodes, k0):
+    return f"{case}_nu{nu}_meshfree{nodes}" + ("" if k0 == 30 else f"_k{k0}")
+
+
 def meshfree_runs(a, box, phi_start, phi_j):
-    """(run directory name, scenario text) of every meshfree run."""
+    """(run directory name, scenario text) of every meshfree run, the longest first."""
     runs = []
-    for case in ("isotropic", "oedometric"):
-        for nu in (0.3, NU_MESHFREE_HIGH):
-            # The convergence in nodal density on the isotropic cases; the oedometric ones at the
-            # reference density only.
-            densities = DENSITIES if case == "isotropic" else DENSITIES[-1:]
-            for n in densities:
-                name = f"{case}_nu{nu}_meshfree{n}"
-                runs.append((name, common_text(a, box, phi_start, phi_j, case, nu, name,
-                                               model=f"Meshfree((boundary_nodes: {n}, grading: {MESHFREE_GRADING}, "
-                                               f"law: NeoHookean, scheme: CentralDifference, k0: {MESHFREE_K0}, "
-                                               f"rayleigh_alpha: {MESHFREE_ALPHA}))",
-                                               extra="", time_step=f"Fixed({ROW_STRAIN / a.rate:.6g})", every=1)))
+    for case, nu, nodes, k0 in MESHFREE_RUNS:
+        name = meshfree_name(case, nu, nodes, k0)
+        runs.append((name, common_text(a, box, phi_start, phi_j, case, nu, name,
+                                       model=f"Meshfree((boundary_nodes: {nodes}, grading: {MESHFREE_GRADING}, "
+                                       f"law: NeoHookean, scheme: CentralDifference, k0: {float(k0)}, "
+                                       f"rayleigh_alpha: {MESHFREE_ALPHA}))",
+                                       extra="", time_step=f"Fixed({ROW_STRAIN / a.rate:.6g})", every=1)))
     return runs
 
 
@@ -212,8 +223,9 @@ def common_text(a, box, phi_start, phi_j, case, nu, name, model, extra, time_ste
 
 
 
-# The SDEM nu paired with each meshfree nu.
-NU_PAIRS = [(0.3, 0.3), (0.5, NU_MESHFREE_HIGH)]
+# The SDEM nu paired with each meshfree nu: the same nu, and SDEM's incompressible grains
+# against the meshfree solver's most nearly incompressible ones.
+NU_PAIRS = [(0.3, 0.3), (NU_MESHFREE_HIGH, NU_MESHFREE_HIGH), (0.5, NU_MESHFREE_HIGH)]
 CASES = ("isotropic", "oedometric")
 # Rows of a run at most every this many steps (SDEM; its time step is ~1e-3).
 SDEM_EVERY = 20
@@ -224,8 +236,8 @@ STRAIN_STEP = 0.0025
 # rho c v ~ 5e-4 E (the walls' speed at the default rate) and is not a quasi-static measure.
 P_LOADED = 5e-3
 # The (a, b) grid of --fit.
-FIT_A = [0.45, 0.5, 0.58, 0.65, 0.75]
-FIT_B = [1.0, 1.5, 2.0, 3.0, 4.0]
+FIT_A = [0.45, 0.5, 0.58, 0.65, 0.75, 0.85]
+FIT_B = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
 
 
 def sdem_text(a, box, phi_start, phi_j, case, nu, name, variant, law=None, rate=None):
@@ -284,9 +296,11 @@ class Run:
         area0 = w0 * h0
         self.rows = rows
         self.strain = [1.0 - float(r["box_width"]) * float(r["box_height"]) / area0 for r in rows]
-        self.cpu = float((run_dir / "cost.txt").read_text())
-        self.summary = read_summary(run_dir)
-        self.grains = list(csv.DictReader(open(run_dir / "grains.csv")))
+        # A run still going (or stopped) has no cost, summary or grains yet.
+        finished = (run_dir / "cost.txt").exists()
+        self.cpu = float((run_dir / "cost.txt").read_text()) if finished else float("nan")
+        self.summary = read_summary(run_dir) if finished else {}
+        self.grains = list(csv.DictReader(open(run_dir / "grains.csv"))) if finished else []
 
     def at(self, column, strain):
         """`column` linearly interpolated at this volumetric strain (None outside the run)."""
@@ -396,8 +410,14 @@ def chart_case(path, title, curves):
     def series(column, transform=float):
         xs, ys, cs, ls, ds = [], [], [], [], []
         for label, run, colour, dash in curves:
-            xs.append(run.strain)
-            ys.append([transform(r[column]) for r in run.rows])
+            # A run of an sdem before a column (z_nr3) has no curve of it.
+            points = [(e, transform(r.get(column) or "nan")) for e, r in zip(run.strain, run.rows)]
+            # z_nr3 is 0 while no 3-contact network exists: drawn where there is one.
+            points = [(e, v) for e, v in points if v == v and not (column == "z_nr3" and v == 0)]
+            if not points:
+                continue
+            xs.append([e for e, _ in points])
+            ys.append([v for _, v in points])
             cs.append(colour), ls.append(f"{label} {column}"), ds.append(dash)
         return xs, ys, cs, ls, ds
 
@@ -413,7 +433,7 @@ def chart_case(path, title, curves):
         y0 = 60 + (k // 2) * h
         xs, ys, cs, ls, ds = two(*cols) if len(cols) == 2 else series(cols[0])
         svg += panel(x0, y0, pw, ph, xs, ys, cs, ls, "volumetric strain 1 - A/A0", ylabel,
-                     " and ".join(cols), dashes=ds)
+                     " and ".join(cols), dashes=ds, from_zero=cols != ("phi",))
     svg.append("</svg>")
     path.write_text("\n".join(svg))
 
@@ -458,22 +478,26 @@ def report(a, out):
     fits = []
     for case in CASES:
         for nu, nu_mf in NU_PAIRS:
-            mf = {n: load(f"{case}_nu{nu_mf}_meshfree{n}") for n in DENSITIES}
-            ref_n = max((n for n in DENSITIES if mf[n]), default=None)
-            if ref_n is None:
+            mf = {(k0, n): load(meshfree_name(c, v, n, k0)) for c, v, n, k0 in MESHFREE_RUNS
+                  if (c, v) == (case, nu_mf)}
+            mf = {key: run for key, run in mf.items() if run}
+            if not mf:
                 print(f"{case} nu {nu}: no meshfree run yet", flush=True)
                 continue
-            ref = mf[ref_n]
-            for n in DENSITIES:
-                if mf[n] and n != ref_n:
-                    rms, worst, at_end, count = error_measures(ref, mf[n])
-                    convergence.append(dict(case=case, nu=nu_mf, boundary_nodes=n, reference_nodes=ref_n,
-                                            rms_rel_err_p=rms, max_rel_err_p=worst,
-                                            rel_err_p_end=at_end["p_c"], cpu_s=mf[n].cpu, cpu_s_ref=ref.cpu,
+            ref_key = max(mf)
+            ref = mf[ref_key]
+            ref_n = f"{ref_key[1]} nodes, k0 = {ref_key[0]}"
+            for (k0, n), run in sorted(mf.items()):
+                if (k0, n) != ref_key:
+                    rms, worst, at_end, count = error_measures(ref, run)
+                    convergence.append(dict(case=case, nu=nu_mf, boundary_nodes=n, k0=k0,
+                                            reference=ref_n, rms_rel_err_p=rms, max_rel_err_p=worst,
+                                            rel_err_p_end=at_end["p_c"], cpu_s=run.cpu, cpu_s_ref=ref.cpu,
                                             points=count))
-                    chart_points.append((f"{case} nu{nu_mf} meshfree {n} nodes", mf[n].cpu, rms, "#393"))
+                    chart_points.append((f"{case} nu{nu_mf} meshfree {n} nodes k0 {k0}", run.cpu, rms, "#393"))
 
-            distributions.append((case, nu_mf, f"meshfree{ref_n}") + mean_stress_distribution(ref))
+            if nu == nu_mf:
+                distributions.append((case, nu_mf, f"meshfree {ref_n}") + mean_stress_distribution(ref))
             curves = [(f"meshfree {ref_n}", ref, "#000", "")]
             for label in list(SDEM_VARIANTS) + ["full_slow"]:
                 run = load(f"{case}_nu{nu}_{label}")
@@ -509,9 +533,20 @@ def report(a, out):
                         best = (rms, ca, cb, run)
             if best:
                 curves.append((f"SDEM fitted a={best[1]} b={best[2]}", best[3], "#393", "1,2"))
+            # The last frame of the reference and of the full model, on one colour scale.
+            full = load(f"{case}_nu{nu}_full")
+            if full and a.pictures:
+                top = 2.0 * float(ref.rows[-1]["p_c"])
+                for run, tag in ((ref, "meshfree"), (full, "sdem")):
+                    picture = out / f"{case}_nu{nu}_{tag}.png"
+                    if tag == "meshfree" and nu != nu_mf and picture.with_name(f"{case}_nu{nu_mf}_meshfree.png").exists():
+                        continue
+                    subprocess.run([a.sdem, "render", str(run.dir / "trajectory.mcap"), "--out", str(picture),
+                                    "--size", "500", "--stress-max", f"{top:.3e}"], check=True,
+                                   stdout=subprocess.DEVNULL)
             chart_case(out / f"{case}_nu{nu}.svg",
                        f"{case} compaction, {ref.summary.get('grains', '?')} grains: meshfree (nu = {nu_mf}, "
-                       f"{ref_n} boundary nodes) against SDEM (nu = {nu})", curves)
+                       f"{ref_n}) against SDEM (nu = {nu})", curves)
     write_csv(out / "sdem_vs_meshfree.csv", rows)
     write_csv(out / "summary.csv", summary)
     write_csv(out / "convergence.csv", convergence)
@@ -552,10 +587,10 @@ def print_tables(summary, convergence, jamming, fits, distributions):
         print(f"| {s['case']} | {s['nu']} | {s['model']} | {100 * s['rms_rel_err_p']:.1f}% | "
               f"{100 * s['max_rel_err_p']:.1f}% | {pct(s['rel_err_sxx_end'])} | {pct(s['rel_err_syy_end'])} | "
               f"{s['cpu_s']:.1f} | {s['cpu_s_ref']:.0f} | {s['cost_ratio']:.0f} |")
-    print("\n| case | nu | nodes | against | RMS diff p_c | max diff p_c | p_c at end | CPU s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("\n| case | nu | nodes | k0 | against | RMS diff p_c | max diff p_c | p_c at end | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for c in convergence:
-        print(f"| {c['case']} | {c['nu']} | {c['boundary_nodes']} | {c['reference_nodes']} | "
+        print(f"| {c['case']} | {c['nu']} | {c['boundary_nodes']} | {c['k0']} | {c['reference']} | "
               f"{100 * c['rms_rel_err_p']:.1f}% | {100 * c['max_rel_err_p']:.1f}% | {pct(c['rel_err_p_end'])} | {c['cpu_s']:.0f} |")
     print("\n| run | 2-rule: phi_0 | Z_0 | eq. 69 RMS err | 3-rule: phi_0 | Z_0 | p_c there | eq. 69 RMS err |")
     print("|---|---|---|---|---|---|---|---|")
@@ -598,6 +633,8 @@ def main():
     ap.add_argument("--fit", action="store_true",
                     help=f"also run SDEM over the (a, b) grid {FIT_A} x {FIT_B} to fit the law to the reference")
     ap.add_argument("--report-only", action="store_true", help="run nothing: report on the runs there are")
+    ap.add_argument("--pictures", action="store_true",
+                    help="draw the last state of the reference and of SDEM full (`sdem render`, PNG)")
     ap.add_argument("--jamming-runs", nargs="*", default=[], metavar="RUN_DIR",
                     help="other runs (e.g. of scenarios/isotropic_A.ron) whose jamming point and eq. 69 error "
                          "to report with both rattler rules")
@@ -611,7 +648,7 @@ def main():
     if not a.report_only:
         # The longest first (oedometric, nearly incompressible, finest), so that the pool ends
         # together; then SDEM.
-        jobs = [] if a.skip_meshfree else meshfree_runs(a, box, phi_start, phi_j)[::-1]
+        jobs = [] if a.skip_meshfree else meshfree_runs(a, box, phi_start, phi_j)
         jobs += sdem_runs(a, box, phi_start, phi_j)
         if a.fit:
             jobs += fit_runs(a, box, phi_start, phi_j)
