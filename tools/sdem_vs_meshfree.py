@@ -236,8 +236,8 @@ STRAIN_STEP = 0.0025
 # rho c v ~ 5e-4 E (the walls' speed at the default rate) and is not a quasi-static measure.
 P_LOADED = 5e-3
 # The (a, b) grid of --fit.
-FIT_A = [0.45, 0.5, 0.58, 0.65, 0.75, 0.85]
-FIT_B = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
+FIT_A = [0.45, 0.5, 0.58, 0.65, 0.75, 0.85, 1.0, 1.2]
+FIT_B = [0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
 
 
 def sdem_text(a, box, phi_start, phi_j, case, nu, name, variant, law=None, rate=None):
@@ -395,7 +395,7 @@ def eq69_error(rows, phi0, z0):
 
 # --- charts ---------------------------------------------------------------------------------
 
-COLOURS = ["#000", "#c33", "#36c", "#393", "#c6c", "#c90"]
+NU_COLOURS = {0.3: "#c33", NU_MESHFREE_HIGH: "#393", 0.5: "#36c"}
 
 
 def chart_case(path, title, curves):
@@ -439,10 +439,12 @@ def chart_case(path, title, curves):
 
 
 def log_panel(points, path, title):
-    """Error against CPU seconds, log-log, a labelled dot per point: [(label, cpu, err, colour)]."""
-    w, h, m = 900, 520, 80
+    """Error against CPU seconds, log-log, a labelled dot per point: [(label, cpu, err, colour)];
+    an error of None (the reference) sits on the floor of the chart, 0.01."""
+    w, h, m = 1000, 700, 80
+    floor = 0.01
     xs = [math.log10(p[1]) for p in points]
-    ys = [math.log10(max(p[2], 1e-4)) for p in points]
+    ys = [math.log10(max(p[2] if p[2] is not None else floor, floor)) for p in points]
     lx, hx = min(xs) - 0.2, max(xs) + 0.2
     ly, hy = min(ys) - 0.2, max(ys) + 0.2
     sx = lambda x: m + (x - lx) / (hx - lx) * (w - 2 * m)
@@ -462,9 +464,14 @@ def log_panel(points, path, title):
     if ly <= -1 <= hy:
         out.append(f'<line x1="{m}" x2="{w - m}" y1="{sy(-1)}" y2="{sy(-1)}" stroke="#999" stroke-dasharray="4,4"/>'
                    f'<text x="{w - m - 4}" y="{sy(-1) - 4}" text-anchor="end" fill="#999">10% (the paper\'s claim)</text>')
-    for (label, _, _, colour), x, y in zip(points, xs, ys):
+    for k, ((label, _, _, colour), x, y) in enumerate(zip(points, xs, ys)):
+        # Labels of the right half to the left of their dot, so that they stay in the chart;
+        # the meshfree ones stacked (their dots sit together).
+        right = sx(x) > w / 2
+        dy = -5 - 14 * sum(1 for p in points[:k] if p[3] == colour == "#000") if colour == "#000" else -5
         out.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="4" fill="{colour}"/>'
-                   f'<text x="{sx(x) + 6:.1f}" y="{sy(y) - 5:.1f}" fill="{colour}">{label}</text>')
+                   f'<text x="{sx(x) + (-6 if right else 6):.1f}" y="{sy(y) + dy:.1f}" fill="{colour}" '
+                   f'text-anchor="{"end" if right else "start"}">{label}</text>')
     out.append("</svg>")
     path.write_text("\n".join(out))
 
@@ -488,13 +495,16 @@ def report(a, out):
             ref = mf[ref_key]
             ref_n = f"{ref_key[1]} nodes, k0 = {ref_key[0]}"
             for (k0, n), run in sorted(mf.items()):
-                if (k0, n) != ref_key:
+                if (k0, n) != ref_key and nu == nu_mf:
                     rms, worst, at_end, count = error_measures(ref, run)
                     convergence.append(dict(case=case, nu=nu_mf, boundary_nodes=n, k0=k0,
                                             reference=ref_n, rms_rel_err_p=rms, max_rel_err_p=worst,
                                             rel_err_p_end=at_end["p_c"], cpu_s=run.cpu, cpu_s_ref=ref.cpu,
                                             points=count))
-                    chart_points.append((f"{case} nu{nu_mf} meshfree {n} nodes k0 {k0}", run.cpu, rms, "#393"))
+                    chart_points.append((case, f"meshfree {n} nodes k0 {k0} (nu {nu_mf})", run.cpu, rms, "#000"))
+            if nu == nu_mf:
+                # The reference has no error by definition: drawn on the chart's floor.
+                chart_points.append((case, f"meshfree reference (nu {nu_mf}): {ref_n}", ref.cpu, None, "#000"))
 
             if nu == nu_mf:
                 distributions.append((case, nu_mf, f"meshfree {ref_n}") + mean_stress_distribution(ref))
@@ -516,7 +526,7 @@ def report(a, out):
                                     rel_err_syy_end=at_end["syy_c"], rel_err_p_end=at_end["p_c"],
                                     within_10pct=worst <= 0.10, points=count, cpu_s=run.cpu, cpu_s_ref=ref.cpu,
                                     cost_ratio=ref.cpu / run.cpu))
-                chart_points.append((f"{case} nu{nu} {label}", run.cpu, rms, "#c33" if case == "isotropic" else "#36c"))
+                chart_points.append((case, f"{label} (nu {nu})", run.cpu, rms, NU_COLOURS[nu]))
                 if label == "full":
                     distributions.append((case, nu, label) + mean_stress_distribution(run))
                     curves.append(("SDEM full", run, "#c33", "6,3"))
@@ -533,6 +543,8 @@ def report(a, out):
                         best = (rms, ca, cb, run)
             if best:
                 curves.append((f"SDEM fitted a={best[1]} b={best[2]}", best[3], "#393", "1,2"))
+                chart_points.append((case, f"full, a={best[1]} b={best[2]} fitted (nu {nu})", best[3].cpu,
+                                     best[0], NU_COLOURS[nu]))
             # The last frame of the reference and of the full model, on one colour scale.
             full = load(f"{case}_nu{nu}_full")
             if full and a.pictures:
@@ -562,10 +574,12 @@ def report(a, out):
     write_csv(out / "mean_stress_distribution.csv",
               [dict(zip(("case", "nu", "model", "q10_over_mean", "q50_over_mean", "q90_over_mean",
                          "cv", "grains"), d)) for d in distributions])
-    if chart_points:
-        log_panel(chart_points, out / "speed_accuracy.svg",
-                  "SDEM settings against the meshfree reference (red: isotropic, blue: oedometric, "
-                  "green: coarser meshfree)")
+    for case in CASES:
+        points = [p[1:] for p in chart_points if p[0] == case]
+        if points:
+            log_panel(points, out / f"speed_accuracy_{case}.svg",
+                      f"{case}: SDEM settings against the meshfree reference "
+                      f"(red: nu 0.3, green: 0.45, blue: 0.5; black: meshfree)")
     print_tables(summary, convergence, jamming, fits, distributions)
 
 
