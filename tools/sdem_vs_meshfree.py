@@ -237,7 +237,8 @@ STRAIN_STEP = 0.0025
 P_LOADED = 5e-3
 # The (a, b) grid of --fit.
 FIT_A = [0.45, 0.5, 0.58, 0.65, 0.75, 0.85, 1.0, 1.2]
-FIT_B = [0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
+# (sdem requires b > 0.)
+FIT_B = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
 
 
 def sdem_text(a, box, phi_start, phi_j, case, nu, name, variant, law=None, rate=None):
@@ -287,9 +288,8 @@ class Run:
     def __init__(self, run_dir):
         self.dir = run_dir
         rows = list(csv.DictReader(open(run_dir / "macro.csv")))
-        area0 = float(rows[0]["box_width"]) * float(rows[0]["box_height"])
-        # The box area of the first row is after one output interval: take the start's from the
-        # scenario's box instead (the same for every run of a packing).
+        # The first row is one output interval in: the start's box is the scenario's (the same
+        # for every run of a packing).
         text = (run_dir.parent / f"{run_dir.name}.ron").read_text()
         w0 = float(re.search(r"box_width: ([0-9.e-]+)", text).group(1))
         h0 = float(re.search(r"box_height: ([0-9.e-]+)", text).group(1))
@@ -345,14 +345,14 @@ def strain_points(ref, other):
     return [STRAIN_STEP * k for k in range(1, int(end / STRAIN_STEP) + 1)]
 
 
-def relative_errors(ref, run, column="p_c", loaded_only=True):
-    """(strain, relative error of `column` against the reference) over the common strains,
-    the loaded part only unless told otherwise."""
+def relative_errors(ref, run, column="p_c"):
+    """(strain, relative error of `column` against the reference) over the common strains of
+    the loaded part."""
     out = []
     for e in strain_points(ref, run):
         r, v = ref.at("p_c", e), run.at(column, e)
         rc = ref.at(column, e)
-        if r is None or v is None or rc is None or (loaded_only and r < P_LOADED) or rc == 0:
+        if r is None or v is None or rc is None or r < P_LOADED or rc == 0:
             continue
         out.append((e, (v - rc) / abs(rc)))
     return out

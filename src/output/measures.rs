@@ -4,6 +4,14 @@ use crate::boundary::loading::LoadState;
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, box_size};
 use crate::integration::World;
 
+/// The columns of `macro.csv` that every sdem wrote; the later ones follow in [`Measures::HEADER`]
+/// (a macro, so that the headers of older files are spelled once, with the current one).
+macro_rules! columns_before_levels {
+    () => {
+        "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts"
+    };
+}
+
 /// One row of `macro.csv`.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Measures {
@@ -42,13 +50,19 @@ pub struct Measures {
 }
 
 impl Measures {
-    pub const HEADER: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts,grains_rigid,grains_volumetric,grains_full,z_nr3";
+    pub const HEADER: &'static str = concat!(
+        columns_before_levels!(),
+        ",grains_rigid,grains_volumetric,grains_full,z_nr3"
+    );
 
     /// The header before the `z_nr3` column (macro.csv of sdem before the 3-contact rattler rule).
-    pub const HEADER_WITHOUT_Z_NR3: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts,grains_rigid,grains_volumetric,grains_full";
+    pub const HEADER_WITHOUT_Z_NR3: &'static str = concat!(
+        columns_before_levels!(),
+        ",grains_rigid,grains_volumetric,grains_full"
+    );
 
     /// The header before the level columns (macro.csv of sdem before the adaptive level).
-    pub const HEADER_WITHOUT_LEVELS: &'static str = "step,time,phase,phi,sxx_c,syy_c,p_c,q_c,z,z_nr,kinetic_energy,elastic_energy,inertial_number,strain_rate,box_width,box_height,contacts,capped_contacts";
+    pub const HEADER_WITHOUT_LEVELS: &'static str = columns_before_levels!();
 
     /// Wall stresses and packing fraction only: cheap enough for every step.
     pub fn box_state(world: &World) -> (f64, f64, f64, f64, f64) {
