@@ -97,11 +97,42 @@ enum Command {
         resolution: f64,
     },
     /// Fit the secant contact law (a, b) to single-grain meshfree compressions (SPEC §10):
-    /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg.
+    /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg. With
+    /// --assembly: fit it to reference runs of whole assemblies instead (writes
+    /// DIR/assembly_fit.csv, DIR/assembly_fit.txt and the runs in DIR/runs/).
     Calibrate {
         /// Poisson's ratios, comma separated (default 0,0.1,0.2,0.3,0.4,0.45,0.49).
         #[arg(long, value_delimiter = ',')]
         nu: Option<Vec<f64>>,
+        /// An SDEM scenario to fit on (repeatable: one pair (a, b) for all of them), each paired
+        /// in order with a --reference run of the same packing, walls, loading and material
+        /// (e.g. a meshfree run of tools/sdem_vs_meshfree.py). The error is p_c's relative
+        /// error at equal box strain over the loaded part (reference p_c >= 5e-3 E).
+        #[arg(long, value_name = "SCENARIO", requires = "reference",
+              conflicts_with_all = ["nu", "final_side", "steps", "boundary_nodes"])]
+        assembly: Vec<PathBuf>,
+        /// The reference run (directory or macro.csv) of each --assembly scenario.
+        #[arg(long, value_name = "RUN", requires = "assembly")]
+        reference: Vec<PathBuf>,
+        /// With --assembly: the grid of a, comma separated (default 0.45,0.5,0.58,0.65,0.75,0.85,1,1.2).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            requires = "assembly",
+            allow_negative_numbers = true
+        )]
+        a: Option<Vec<f64>>,
+        /// With --assembly: the grid of b, comma separated (default 0.5,1,1.5,2,3,4).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            requires = "assembly",
+            allow_negative_numbers = true
+        )]
+        b: Option<Vec<f64>>,
+        /// With --assembly: Nelder–Mead evaluations from the grid's best pair (0: the grid only).
+        #[arg(long, default_value_t = 20, requires = "assembly")]
+        refine: usize,
         /// Output directory.
         #[arg(long, default_value = "out/calibration")]
         out: PathBuf,
@@ -385,12 +416,52 @@ fn run(cli: Cli) -> Result<()> {
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
         }
         Command::Calibrate {
+            assembly,
+            reference,
+            a,
+            b,
+            refine,
+            out,
+            threads,
+            ..
+        } if !assembly.is_empty() => {
+            if assembly.len() != reference.len() {
+                bail!(
+                    "{} --assembly scenarios but {} --reference runs: give one reference per scenario, in the same order",
+                    assembly.len(),
+                    reference.len()
+                );
+            }
+            let mut cases = Vec::new();
+            for (path, reference) in assembly.iter().zip(&reference) {
+                let label = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| format!("case{}", cases.len() + 1));
+                let case = sdem::calibration::AssemblyCase::new(&label, load(path)?, reference)
+                    .with_context(|| format!("the reference of {}", path.display()))?;
+                cases.push(case);
+            }
+            let mut options = sdem::calibration::AssemblyOptions::new(cases, out);
+            if let Some(a) = a {
+                options.a_values = a;
+            }
+            if let Some(b) = b {
+                options.b_values = b;
+            }
+            options.refine_evaluations = refine;
+            let pool = thread_pool(threads)?;
+            let report = pool.install(|| sdem::calibration::run_assembly_calibration(&options))?;
+            println!("{report}");
+        }
+        Command::Calibrate {
             nu,
             out,
             final_side,
             steps,
             boundary_nodes,
             threads,
+            ..
         } => {
             let mut options = sdem::calibration::CalibrateOptions {
                 out_dir: out,

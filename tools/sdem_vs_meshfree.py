@@ -58,13 +58,12 @@ RADII = {
 PHI_START = 0.77
 SHRINK = 0.999
 NU_MESHFREE_HIGH = 0.45
-# Boundary nodes per grain of the meshfree runs; the last is the reference.
-# The meshfree runs: (case, meshfree nu, boundary nodes per grain, penalty k0 in E / R). The
-# reference of a case is its run with the stiffest penalty, then the most nodes; the others
-# measure the convergence in nodal density (same k0) and in penalty (same nodes). The penalty
-# sets the explicit step (k0 = 300: half the step of k0 = 30), so the oedometric cases, the
-# longest, are run at k0 = 30 only, and their penalty error is the one measured on the
-# isotropic case (docs/sdem_vs_meshfree.md).
+# The meshfree runs (`--meshfree` replaces them): (case, meshfree nu, boundary nodes per grain,
+# penalty k0 in E / R). The reference of a case is its run with the stiffest penalty, then the
+# most nodes; the others measure the convergence in nodal density (same k0) and in penalty (same
+# nodes). The penalty sets the explicit step (k0 = 300: half the step of k0 = 30), so the
+# nearly incompressible oedometric case, the longest, is run at k0 = 30 only (its penalty error
+# is the one measured on the other cases, docs/sdem_vs_meshfree.md).
 MESHFREE_RUNS = [
     ("isotropic", NU_MESHFREE_HIGH, 32, 300),
     ("isotropic", 0.3, 32, 300),
@@ -72,6 +71,7 @@ MESHFREE_RUNS = [
     ("isotropic", 0.3, 24, 300),
     ("isotropic", 0.3, 32, 30),
     ("oedometric", NU_MESHFREE_HIGH, 32, 30),
+    ("oedometric", 0.3, 32, 300),
     ("oedometric", 0.3, 32, 30),
 ]
 MESHFREE_GRADING = 3.0
@@ -203,7 +203,7 @@ def meshfree_name(case, nu, nodes, k0):
 def meshfree_runs(a, box, phi_start, phi_j):
     """(run directory name, scenario text) of every meshfree run, the longest first."""
     runs = []
-    for case, nu, nodes, k0 in MESHFREE_RUNS:
+    for case, nu, nodes, k0 in a.meshfree:
         name = meshfree_name(case, nu, nodes, k0)
         runs.append((name, common_text(a, box, phi_start, phi_j, case, nu, name,
                                        model=f"Meshfree((boundary_nodes: {nodes}, grading: {MESHFREE_GRADING}, "
@@ -487,7 +487,7 @@ def report(a, out):
     fits = []
     for case in CASES:
         for nu, nu_mf in NU_PAIRS:
-            mf = {(k0, n): load(meshfree_name(c, v, n, k0)) for c, v, n, k0 in MESHFREE_RUNS
+            mf = {(k0, n): load(meshfree_name(c, v, n, k0)) for c, v, n, k0 in a.meshfree
                   if (c, v) == (case, nu_mf)}
             mf = {key: run for key, run in mf.items() if run}
             if not mf:
@@ -634,6 +634,17 @@ def print_tables(summary, convergence, jamming, fits, distributions):
                 print(f"one pair for both cases at nu {nu}: a = {ca}, b = {cb}, RMS err p_c {100 * err:.1f}%")
 
 
+def meshfree_run(text):
+    """`CASE:NU:NODES:K0` of `--meshfree`."""
+    try:
+        case, nu, nodes, k0 = text.split(":")
+        if case not in CASES:
+            raise ValueError(f"case {case!r} is not one of {', '.join(CASES)}")
+        return case, float(nu), int(nodes), int(k0)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected CASE:NU:NODES:K0 (e.g. isotropic:0.3:32:30): {e}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="out/sdem_vs_meshfree")
@@ -646,6 +657,10 @@ def main():
     ap.add_argument("--jobs", type=int, default=2, help="runs at a time (each on one thread)")
     ap.add_argument("--only", default="", help="regular expression: run only the matching runs")
     ap.add_argument("--skip-meshfree", action="store_true", help="run the SDEM side only")
+    ap.add_argument("--meshfree", nargs="+", type=meshfree_run, metavar="CASE:NU:NODES:K0",
+                    default=MESHFREE_RUNS,
+                    help="the meshfree runs (default: MESHFREE_RUNS), e.g. isotropic:0.3:32:30; the stiffest "
+                         "penalty's finest run of a case and nu is its reference")
     ap.add_argument("--fit", action="store_true",
                     help=f"also run SDEM over the (a, b) grid {FIT_A} x {FIT_B} to fit the law to the reference")
     ap.add_argument("--report-only", action="store_true", help="run nothing: report on the runs there are")

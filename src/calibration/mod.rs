@@ -15,9 +15,11 @@
 //! Both hyperelastic laws are run; the neo-Hookean fit is the result (`a`, `b`), the Saint
 //! Venant–Kirchhoff fit is reported beside it.
 
+pub mod assembly;
 mod chart;
 mod fit;
 
+pub use assembly::{AssemblyCase, AssemblyOptions, AssemblyReport, run_assembly_calibration};
 pub use fit::{SecantFit, fit_secant_law};
 
 use std::path::PathBuf;
