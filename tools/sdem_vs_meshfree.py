@@ -4,6 +4,7 @@
 usage: tools/sdem_vs_meshfree.py [--out out/sdem_vs_meshfree] [--sdem target/release/sdem]
                                  [--sample A|B] [--count 100] [--seed 1] [--rate 4e-3]
                                  [--phi-end 0.90] [--jobs 2] [--only PATTERN] [--report-only]
+                                 [--fit] [--calibrate] [--pictures] [--meshfree CASE:NU:NODES:K0 ...]
 
 One packing, two solvers, the same walls, loading and material:
 
@@ -634,6 +635,29 @@ def print_tables(summary, convergence, jamming, fits, distributions):
                 print(f"one pair for both cases at nu {nu}: a = {ca}, b = {cb}, RMS err p_c {100 * err:.1f}%")
 
 
+def calibrate_assembly(a, out):
+    """`sdem calibrate --assembly` on both cases of each nu (SDEM full's scenario against the
+    case's reference): the one (a, b) pair for both loadings, refined off the grid, in
+    calibrate_nu<nu>/. An existing assembly_fit.txt is kept (delete it to redo)."""
+    runs_dir = out / "runs"
+    for nu, nu_mf in NU_PAIRS:
+        args = []
+        for case in CASES:
+            refs = [(k0, n, meshfree_name(c, v, n, k0)) for c, v, n, k0 in a.meshfree if (c, v) == (case, nu_mf)]
+            refs = [r for r in refs if (runs_dir / r[2] / "cost.txt").exists()]
+            scenario = runs_dir / f"{case}_nu{nu}_full.ron"
+            if refs and scenario.exists():
+                args += ["--assembly", str(scenario), "--reference", str(runs_dir / max(refs)[2])]
+        fit_dir = out / f"calibrate_nu{nu}"
+        if not args:
+            continue
+        if not (fit_dir / "assembly_fit.txt").exists():
+            print(f"sdem calibrate --assembly, nu {nu} ...", flush=True)
+            subprocess.run([a.sdem, "calibrate", *args, "--out", str(fit_dir), "--threads", str(a.jobs)],
+                           check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        print(f"\nnu {nu}: {' '.join(['sdem', 'calibrate', *args])}\n" + (fit_dir / "assembly_fit.txt").read_text())
+
+
 def meshfree_run(text):
     """`CASE:NU:NODES:K0` of `--meshfree`."""
     try:
@@ -663,6 +687,8 @@ def main():
                          "penalty's finest run of a case and nu is its reference")
     ap.add_argument("--fit", action="store_true",
                     help=f"also run SDEM over the (a, b) grid {FIT_A} x {FIT_B} to fit the law to the reference")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="also run `sdem calibrate --assembly` on both cases of each nu (calibrate_nu<nu>/)")
     ap.add_argument("--report-only", action="store_true", help="run nothing: report on the runs there are")
     ap.add_argument("--pictures", action="store_true",
                     help="draw the last state of the reference and of SDEM full (`sdem render`, PNG)")
@@ -697,6 +723,8 @@ def main():
         if failed:
             print(f"{len(failed)} runs failed: {', '.join(failed)} (see runs/<name>.stderr)")
     report(a, out)
+    if a.calibrate:
+        calibrate_assembly(a, out)
 
 
 if __name__ == "__main__":
