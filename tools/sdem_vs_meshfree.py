@@ -657,6 +657,41 @@ def calibrate_assembly(a, out):
         print(f"\nnu {nu}: {' '.join(['sdem', 'calibrate', *args])}\n" + (fit_dir / "assembly_fit.txt").read_text())
 
 
+DISC_NODES = [24, 32, 48, 64, 96]
+DISC_NUS = [0.3, 0.45, 0.49]
+DISC_SIDES = [0.99, 0.985, 0.98, 0.97, 0.96, 0.94, 0.90]
+
+
+def disc_convergence(a, out):
+    """The nodal-density convergence of one meshfree disc pressed by four walls (`sdem calibrate`,
+    implicit, exact contact), at the densities of the assembly runs and above: the force on a
+    wall at each box side over the 96-node force, per nu. The mean wall stress of a disc in its
+    box is F / side (diameter 1, E = 1): side 0.985 carries ~5e-3 E, the start of the loaded part
+    of the assembly comparison. Writes disc_convergence.csv."""
+    forces = {}
+    for n in DISC_NODES:
+        run_dir = out / "disc" / f"nodes{n}"
+        if not (run_dir / "calibration.csv").exists():
+            subprocess.run([a.sdem, "calibrate", "--nu", ",".join(map(str, DISC_NUS)), "--boundary-nodes", str(n),
+                            "--out", str(run_dir), "--threads", str(a.jobs)], check=True,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for r in csv.DictReader(open(run_dir / "calibration.csv")):
+            forces[(n, float(r["nu"]), round(2 * float(r["h"]), 4))] = float(r["F"])
+    rows = []
+    for nu in DISC_NUS:
+        for side in DISC_SIDES:
+            finest = forces[(DISC_NODES[-1], nu, side)]
+            row = dict(nu=nu, box_side=side, wall_stress_finest=finest / side)
+            row.update({f"rel_diff_{n}": forces[(n, nu, side)] / finest - 1 for n in DISC_NODES[:-1]})
+            rows.append(row)
+    write_csv(out / "disc_convergence.csv", rows)
+    print("\n| nu | box side | wall stress (96 nodes) | " + " | ".join(f"{n} nodes" for n in DISC_NODES[:-1]) + " |")
+    print("|---|---|---|" + "---|" * (len(DISC_NODES) - 1))
+    for r in rows:
+        print(f"| {r['nu']} | {r['box_side']} | {r['wall_stress_finest']:.2e} | "
+              + " | ".join(f"{100 * r[f'rel_diff_{n}']:+.1f}%" for n in DISC_NODES[:-1]) + " |")
+
+
 def meshfree_run(text):
     """`CASE:NU:NODES:K0` of `--meshfree`."""
     try:
@@ -688,6 +723,9 @@ def main():
                     help=f"also run SDEM over the (a, b) grid {FIT_A} x {FIT_B} to fit the law to the reference")
     ap.add_argument("--calibrate", action="store_true",
                     help="also run `sdem calibrate --assembly` on both cases of each nu (calibrate_nu<nu>/)")
+    ap.add_argument("--disc-convergence", action="store_true",
+                    help="also compress one meshfree disc at 24 to 96 boundary nodes (`sdem calibrate`): the "
+                         "nodal-density convergence of a contact at the assembly's deformations")
     ap.add_argument("--report-only", action="store_true", help="run nothing: report on the runs there are")
     ap.add_argument("--pictures", action="store_true",
                     help="draw the last state of the reference and of SDEM full (`sdem render`, PNG)")
@@ -724,6 +762,8 @@ def main():
     report(a, out)
     if a.calibrate:
         calibrate_assembly(a, out)
+    if a.disc_convergence:
+        disc_convergence(a, out)
 
 
 if __name__ == "__main__":
