@@ -1,0 +1,315 @@
+//! The periodic cell (SPEC §14): a parallelogram spanned by the columns h1, h2 of the cell matrix
+//! H, repeated over the plane, in place of walls.
+//!
+//! - Reduced coordinates `s = H^-1 (x - origin)`; a wrapped position has `s` in [0, 1)^2.
+//! - A pair's branch vector is its minimum image `d = x_j - x_i - H round(H^-1 (x_j - x_i))`.
+//!   Rounding in reduced coordinates finds the nearest image of every pair closer than half the
+//!   smaller cell width (a width is measured across the cell, perpendicular to the other vector),
+//!   so the interaction range (largest diameter + neighbour skin) must stay below it:
+//!   [`PeriodicCell::check_range`].
+//! - The cell deforms with a velocity gradient L: `dH/dt = L H`. An image shifted by `H n` (n a
+//!   pair of integers) moves with the extra affine velocity `L H n`.
+//! - Simple shear tilts h2 along h1 without end: once the tilt passes half a cell the cell is
+//!   remapped to the equivalent cell of the same lattice ([`PeriodicCell::remap`]), which is what
+//!   Lees–Edwards boundaries do.
+//!
+//! Units: lengths as the scenario's; L in 1/time. Stress tension positive, as SPEC §3.
+
+use glam::{DMat2, DVec2};
+
+/// Why a cell is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CellError {
+    #[error(
+        "the cell vectors ({h1:?}, {h2:?}) span no area or are left-handed (det H = {det:e}): give h1, h2 counter-clockwise"
+    )]
+    Degenerate { h1: DVec2, h2: DVec2, det: f64 },
+    #[error(
+        "the periodic cell is {width:.4e} wide across, under twice the interaction range {range:.4e} \
+         (largest grain diameter + neighbour skin): a grain would meet two images of another; make the cell at least {:.4e} wide",
+        2.0 * range
+    )]
+    TooNarrow { width: f64, range: f64 },
+}
+
+/// A periodic cell: origin (a corner) and cell matrix, columns h1 and h2.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PeriodicCell {
+    pub origin: DVec2,
+    pub matrix: DMat2,
+}
+
+impl PeriodicCell {
+    /// The cell spanned by `h1`, `h2` (counter-clockwise, non-degenerate) from `origin`.
+    pub fn new(origin: DVec2, h1: DVec2, h2: DVec2) -> Result<Self, CellError> {
+        let matrix = DMat2::from_cols(h1, h2);
+        let det = matrix.determinant();
+        if !(det > 0.0 && det.is_finite()) {
+            return Err(CellError::Degenerate { h1, h2, det });
+        }
+        Ok(Self { origin, matrix })
+    }
+
+    /// The axis-aligned cell `[x0, x0 + width] x [y0, y0 + height]`.
+    pub fn rectangle(origin: DVec2, width: f64, height: f64) -> Result<Self, CellError> {
+        Self::new(origin, DVec2::new(width, 0.0), DVec2::new(0.0, height))
+    }
+
+    pub fn h1(&self) -> DVec2 {
+        self.matrix.x_axis
+    }
+
+    pub fn h2(&self) -> DVec2 {
+        self.matrix.y_axis
+    }
+
+    /// Area of the cell (det H > 0).
+    pub fn area(&self) -> f64 {
+        self.matrix.determinant()
+    }
+
+    /// The widths across the cell: the distance between the two sides parallel to h2, and between
+    /// the two sides parallel to h1.
+    pub fn widths(&self) -> [f64; 2] {
+        let area = self.area();
+        [area / self.h2().length(), area / self.h1().length()]
+    }
+
+    /// Refuses a cell in which a pair closer than `range` could have two images within reach.
+    pub fn check_range(&self, range: f64) -> Result<(), CellError> {
+        let width = self.widths()[0].min(self.widths()[1]);
+        if width < 2.0 * range {
+            return Err(CellError::TooNarrow { width, range });
+        }
+        Ok(())
+    }
+
+    /// Reduced coordinates of a position.
+    pub fn reduced(&self, x: DVec2) -> DVec2 {
+        self.matrix.inverse() * (x - self.origin)
+    }
+
+    /// The position of reduced coordinates `s`.
+    pub fn position(&self, s: DVec2) -> DVec2 {
+        self.origin + self.matrix * s
+    }
+
+    /// The image of `x` inside the cell and the image shift `n` it took: `x - H n`.
+    pub fn wrap(&self, x: DVec2) -> (DVec2, [i64; 2]) {
+        let s = self.reduced(x);
+        let n = s.floor();
+        let mut wrapped = x - self.matrix * n;
+        // Round-off can leave s = 1 - 1e-17 -> 1 after the shift: keep [0, 1).
+        let again = self.reduced(wrapped);
+        let fix = DVec2::new(
+            if again.x >= 1.0 { 1.0 } else { 0.0 },
+            if again.y >= 1.0 { 1.0 } else { 0.0 },
+        );
+        wrapped -= self.matrix * fix;
+        let n = n + fix;
+        (wrapped, [n.x as i64, n.y as i64])
+    }
+
+    /// The minimum image of the separation `d = x_j - x_i` and the image shift `n` it took:
+    /// `(d - H n, n)`. The nearest image of every pair closer than half the cell's smaller width.
+    pub fn minimum_image(&self, d: DVec2) -> (DVec2, [i64; 2]) {
+        let n = (self.matrix.inverse() * d).round();
+        (d - self.matrix * n, [n.x as i64, n.y as i64])
+    }
+
+    /// The shift `H n` of image `n`.
+    pub fn image_shift(&self, n: [i64; 2]) -> DVec2 {
+        self.matrix * DVec2::new(n[0] as f64, n[1] as f64)
+    }
+
+    /// The affine velocity of image `n` relative to the original, under the velocity gradient L.
+    pub fn image_velocity(&self, velocity_gradient: DMat2, n: [i64; 2]) -> DVec2 {
+        velocity_gradient * self.image_shift(n)
+    }
+
+    /// One explicit step of `dH/dt = L H`: `H <- (I + dt L) H`, the origin moving with the
+    /// affine field too (`x0 <- x0 + dt L x0`), so that a point of the cell keeps its reduced
+    /// coordinates.
+    pub fn deform(&mut self, velocity_gradient: DMat2, dt: f64) {
+        let step = DMat2::IDENTITY + velocity_gradient * dt;
+        self.matrix = step * self.matrix;
+        self.origin = step * self.origin;
+    }
+
+    /// The tilt of h2 along h1 in units of |h1|: 0 for a rectangle, ±1/2 at the remap.
+    pub fn tilt(&self) -> f64 {
+        self.h1().dot(self.h2()) / self.h1().length_squared()
+    }
+
+    /// Once the tilt passes ±1/2, replaces h2 by `h2 - k h1` (k the nearest integer to the tilt):
+    /// the same lattice of images, the least skewed cell. Returns whether it changed; positions
+    /// must be wrapped again after a remap.
+    pub fn remap(&mut self) -> bool {
+        let k = self.tilt().round();
+        if k == 0.0 {
+            return false;
+        }
+        self.matrix.y_axis -= k * self.h1();
+        true
+    }
+}
+
+/// The stress of the cell from its contacts (SPEC §14), tension positive:
+/// `sigma = (1/A) sum sym(f_i ⊗ d_ij)` over `(f_i, d_ij)`: the force on grain i from j and the
+/// branch vector from i to j (minimum image). A pair pressed together gives sigma < 0.
+pub fn cell_stress(contacts: impl IntoIterator<Item = (DVec2, DVec2)>, area: f64) -> DMat2 {
+    let mut sum = DMat2::ZERO;
+    for (force, branch) in contacts {
+        let outer = DMat2::from_cols(force * branch.x, force * branch.y);
+        sum += (outer + outer.transpose()) * 0.5;
+    }
+    sum * (1.0 / area)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sheared() -> PeriodicCell {
+        PeriodicCell::new(
+            DVec2::new(0.3, -0.2),
+            DVec2::new(2.0, 0.1),
+            DVec2::new(0.7, 1.5),
+        )
+        .unwrap()
+    }
+
+    /// Every image of `d` within `reach` images, by brute force: the nearest.
+    fn nearest_by_search(cell: &PeriodicCell, d: DVec2) -> DVec2 {
+        let mut best = d;
+        for i in -3..=3 {
+            for j in -3..=3 {
+                let c = d - cell.image_shift([i, j]);
+                if c.length() < best.length() {
+                    best = c;
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_minimum_image_is_the_nearest_image_within_half_a_width() {
+        // Expectation: for separations whose nearest image is closer than half the smaller
+        // width, rounding in reduced coordinates finds the same image as a brute-force search.
+        let cell = sheared();
+        let half = 0.5 * cell.widths()[0].min(cell.widths()[1]);
+        let mut checked = 0;
+        for k in 0..2000 {
+            let t = k as f64 * 0.6180339887;
+            let d = DVec2::new(5.0 * (t.fract() - 0.5), 5.0 * ((t * 7.3).fract() - 0.5));
+            let nearest = nearest_by_search(&cell, d);
+            if nearest.length() < half * 0.999 {
+                let (image, n) = cell.minimum_image(d);
+                assert!(
+                    (image - nearest).length() < 1e-12,
+                    "{d:?}: {image:?} vs {nearest:?}"
+                );
+                assert!((d - cell.image_shift(n) - image).length() < 1e-12);
+                checked += 1;
+            }
+        }
+        assert!(checked > 100, "only {checked} separations tested");
+    }
+
+    #[test]
+    fn wrapping_puts_a_point_in_the_cell_by_a_lattice_shift() {
+        let cell = sheared();
+        for k in 0..500 {
+            let t = k as f64 * 0.7548776662;
+            let x = DVec2::new(20.0 * (t.fract() - 0.5), 20.0 * ((t * 3.1).fract() - 0.5));
+            let (w, n) = cell.wrap(x);
+            let s = cell.reduced(w);
+            assert!(
+                (0.0..1.0).contains(&s.x) && (0.0..1.0).contains(&s.y),
+                "{s:?}"
+            );
+            assert!((x - cell.image_shift(n) - w).length() < 1e-12);
+            // Wrapping a wrapped point changes nothing.
+            assert_eq!(cell.wrap(w).1, [0, 0]);
+        }
+    }
+
+    #[test]
+    fn an_affine_deformation_keeps_reduced_coordinates() {
+        // Expectation: points moving with the affine field x' = L x (a contact-free gas at rest
+        // relative to the cell) keep their reduced coordinates exactly in the limit, and to the
+        // integrator's order here: the explicit step is exact for one step of (I + dt L).
+        let mut cell = sheared();
+        let l = DMat2::from_cols(DVec2::new(-0.1, 0.02), DVec2::new(0.3, 0.05));
+        let points: Vec<DVec2> = (0..10)
+            .map(|k| cell.position(DVec2::new(0.1 * k as f64, 0.07 * k as f64)))
+            .collect();
+        let before: Vec<DVec2> = points.iter().map(|&x| cell.reduced(x)).collect();
+        let dt = 1e-3;
+        let mut moved = points.clone();
+        for _ in 0..100 {
+            cell.deform(l, dt);
+            for x in &mut moved {
+                *x += dt * (l * *x);
+            }
+        }
+        for (x, s) in moved.iter().zip(&before) {
+            assert!((cell.reduced(*x) - *s).length() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn remapping_keeps_the_lattice_and_bounds_the_tilt() {
+        // Expectation: a simple shear to a tilt of 1.3 remaps to a tilt in [-1/2, 1/2], the
+        // same area, and the same set of images (each new cell vector is a lattice vector of the
+        // old cell with an integer inverse).
+        let mut cell = PeriodicCell::rectangle(DVec2::ZERO, 1.0, 1.0).unwrap();
+        cell.matrix.y_axis.x = 1.3;
+        let old = cell;
+        assert!(cell.remap());
+        assert!(cell.tilt().abs() <= 0.5, "{}", cell.tilt());
+        assert!((cell.area() - old.area()).abs() < 1e-15);
+        let in_old = old.matrix.inverse() * cell.matrix;
+        for v in in_old.to_cols_array() {
+            assert!((v - v.round()).abs() < 1e-12, "{in_old:?}");
+        }
+        assert!(!cell.remap());
+        // A pair closer than half of either cell's smaller width: the same nearest image.
+        let d = DVec2::new(0.9, 0.05);
+        let (a, b) = (old.minimum_image(d).0, cell.minimum_image(d).0);
+        assert!((a - b).length() < 1e-12 && (a - DVec2::new(-0.1, 0.05)).length() < 1e-12);
+    }
+
+    #[test]
+    fn a_narrow_or_degenerate_cell_is_refused() {
+        let cell = PeriodicCell::rectangle(DVec2::ZERO, 1.0, 0.1).unwrap();
+        let e = cell.check_range(0.06).unwrap_err();
+        assert!(e.to_string().contains("at least 1.2000e-1"), "{e}");
+        assert!(cell.check_range(0.05).is_ok());
+        assert!(matches!(
+            PeriodicCell::new(DVec2::ZERO, DVec2::X, DVec2::X * 2.0),
+            Err(CellError::Degenerate { .. })
+        ));
+        assert!(PeriodicCell::new(DVec2::ZERO, DVec2::Y, DVec2::X).is_err());
+    }
+
+    #[test]
+    fn cell_stress_is_objective_and_compressive_for_a_pressed_pair() {
+        // Expectation: a pair pressed together (force on i pointing away from j) gives a
+        // negative normal stress along the branch; rotating forces and branches by R rotates the
+        // stress to R sigma R^T.
+        let branch = DVec2::new(0.02, 0.01);
+        let force = -3.0 * branch.normalize();
+        let sigma = cell_stress([(force, branch)], 0.5);
+        let n = branch.normalize();
+        assert!(n.dot(sigma * n) < 0.0);
+        assert!((sigma.x_axis.y - sigma.y_axis.x).abs() < 1e-15);
+        let rotation = DMat2::from_angle(0.7);
+        let rotated = cell_stress([(rotation * force, rotation * branch)], 0.5);
+        let expected = rotation * sigma * rotation.transpose();
+        for (a, b) in rotated.to_cols_array().iter().zip(expected.to_cols_array()) {
+            assert!((a - b).abs() < 1e-12);
+        }
+    }
+}
