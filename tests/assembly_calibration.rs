@@ -50,13 +50,7 @@ fn tiny(a: f64, b: f64) -> Scenario {
 fn reference_run(dir: &Path, a: f64, b: f64) {
     let options = RunOptions {
         out_dir: dir.to_path_buf(),
-        progress_seconds: None,
-        mcap: None,
-        progress_bar: false,
-        checkpoint_every: 0,
-        checkpoint_seconds: None,
-        stop: None,
-        stop_after_step: None,
+        ..Default::default()
     };
     run_scenario(&tiny(a, b), &options).unwrap();
 }

@@ -504,6 +504,17 @@ def report(a, out):
                                             rel_err_p_end=at_end["p_c"], cpu_s=run.cpu, cpu_s_ref=ref.cpu,
                                             points=count))
                     chart_points.append((case, f"meshfree {n} nodes k0 {k0} (nu {nu_mf})", run.cpu, rms, "#000"))
+            # Nodal density alone: each density against the next finer one at the same penalty,
+            # where the reference is not that finer run (its row is above).
+            for (k0, n), run in sorted(mf.items()):
+                finer = sorted(m for (k, m) in mf if k == k0 and m > n)
+                if finer and nu == nu_mf and (k0, finer[0]) != ref_key:
+                    other = mf[(k0, finer[0])]
+                    rms, worst, at_end, count = error_measures(other, run)
+                    convergence.append(dict(case=case, nu=nu_mf, boundary_nodes=n, k0=k0,
+                                            reference=f"{finer[0]} nodes, k0 = {k0}", rms_rel_err_p=rms,
+                                            max_rel_err_p=worst, rel_err_p_end=at_end["p_c"], cpu_s=run.cpu,
+                                            cpu_s_ref=other.cpu, points=count))
             if nu == nu_mf:
                 # The reference has no error by definition: drawn on the chart's floor.
                 chart_points.append((case, f"meshfree reference (nu {nu_mf}): {ref_n}", ref.cpu, None, "#000"))

@@ -396,13 +396,7 @@ fn run_case(
         .join(format!("{}_a{a}_b{b}", case.label));
     let run_options = RunOptions {
         out_dir: out_dir.clone(),
-        progress_seconds: None,
-        mcap: None,
-        progress_bar: false,
-        checkpoint_every: 0,
-        checkpoint_seconds: None,
-        stop: None,
-        stop_after_step: None,
+        ..Default::default()
     };
     run_scenario(&scenario, &run_options).map_err(|e| e.to_string())?;
     let rows = read_macro_csv(&out_dir.join("macro.csv"))?;
