@@ -434,10 +434,22 @@ fn run(cli: Cli) -> Result<()> {
             }
             let mut cases = Vec::new();
             for (path, reference) in assembly.iter().zip(&reference) {
-                let label = path
+                let stem = path
                     .file_stem()
                     .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| format!("case{}", cases.len() + 1));
+                    .unwrap_or_else(|| "case".to_string());
+                // The same scenario against two references: stem, stem_2, ...
+                let taken = |l: &str| {
+                    cases
+                        .iter()
+                        .any(|c: &sdem::calibration::AssemblyCase| c.label == l)
+                };
+                let mut label = stem.clone();
+                let mut k = 1;
+                while taken(&label) {
+                    k += 1;
+                    label = format!("{stem}_{k}");
+                }
                 let case = sdem::calibration::AssemblyCase::new(&label, load(path)?, reference)
                     .with_context(|| format!("the reference of {}", path.display()))?;
                 cases.push(case);

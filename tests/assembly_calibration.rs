@@ -136,6 +136,11 @@ fn bad_input_is_refused_with_a_message() {
         .unwrap_err();
     assert!(e.to_string().contains("nothing to fit"), "{e}");
 
+    // Two cases with one label would share their run directories.
+    let e = run_assembly_calibration(&AssemblyOptions::new(vec![case(), case()], dir.join("fit")))
+        .unwrap_err();
+    assert!(e.to_string().contains("two cases are labelled tiny"), "{e}");
+
     // A missing reference file names the path.
     let e = AssemblyCase::new("tiny", tiny(0.58, 2.0), &dir.join("nowhere")).unwrap_err();
     assert!(e.to_string().contains("nowhere"), "{e}");

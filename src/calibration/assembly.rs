@@ -349,8 +349,13 @@ fn check(options: &AssemblyOptions) -> Result<(), CalibrationError> {
     if !(options.strain_step > 0.0 && options.loaded_pressure > 0.0) {
         return bad("the strain step and the loaded pressure must be > 0".into());
     }
-    for case in &options.cases {
+    for (k, case) in options.cases.iter().enumerate() {
         let label = &case.label;
+        if options.cases[..k].iter().any(|c| c.label == *label) {
+            return bad(format!(
+                "two cases are labelled {label}: each needs its own label (it names its run directories)"
+            ));
+        }
         if crate::run::meshfree::settings_of(&case.scenario).is_some() {
             return bad(format!(
                 "{label}: a meshfree scenario; the assembly calibration runs SDEM scenarios against a reference run"
