@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Grain against wall, and grain against grain: SDEM's contact law on one and two discs (issue #13).
 
-usage: tools/disc_column.py [--out out/disc_column] [--sdem target/release/sdem] [--nodes 64]
+usage: tools/disc_column.py [--out out/disc_column] [--sdem target/release/sdem] [--nodes 64] [--nu 0.3]
 
 The secant law is calibrated on one disc pressed by walls (`sdem calibrate`); in an assembly
 most contacts are between two curved grains. This tool presses a row of one disc, and a row of
@@ -9,7 +9,7 @@ two discs, in a box one diameter high (the right wall moves left at the strain r
 strain of the box width of 0.1; the other walls stay, and hold the row straight: a free row of
 frictionless discs buckles), with the meshfree
 solver (explicit, neo-Hookean, `--nodes` boundary nodes, k0 = 300 E/R) and with SDEM full (the
-paper's law, the single-grain calibration, and the assembly pair a = 1.0, b = 2.0), nu = 0.3,
+paper's law, the single-grain calibration, and the assembly pair a = 1.0, b = 2.0), nu = `--nu`,
 E = rho = 1, R = 0.012. It prints the stress on the right wall of each SDEM law over the
 meshfree one, at a few strains (of the box width) of each case. A third case is the
 calibration's own loading: one disc, the four walls in. If the law transfers from wall contacts
@@ -41,13 +41,13 @@ CASES = [("1 disc, four walls in", 1, "Isotropic"), ("1 disc, right wall in", 1,
          ("2 discs, right wall in", 2, "Oedometric")]
 
 
-def scenario(name, discs, phase, model, extra, time_step, every):
+def scenario(name, discs, phase, model, extra, time_step, every, nu):
     width, height = 2 * R * discs, 2 * R
     return f"""// Written by tools/disc_column.py.
 Scenario(
     name: "{name}",
     sample: (file: "packing_{discs}.csv", box_width: {width!r}, box_height: {height!r}),
-    material: (young: 1.0, poisson: 0.3, density: 1.0),
+    material: (young: 1.0, poisson: {nu}, density: 1.0),
     model: {model},{extra}
     time_step: {time_step},
     loading: [
@@ -85,6 +85,7 @@ def main():
     ap.add_argument("--out", default="out/disc_column")
     ap.add_argument("--sdem", default="target/release/sdem")
     ap.add_argument("--nodes", type=int, default=64, help="boundary nodes per meshfree disc")
+    ap.add_argument("--nu", type=float, default=0.3, help="Poisson's ratio of both solvers' grains")
     a = ap.parse_args()
     if not pathlib.Path(a.sdem).exists():
         sys.exit(f"disc_column: {a.sdem} not found: build it with `cargo build --release`")
@@ -98,14 +99,14 @@ def main():
         run(a.sdem, out, mf, scenario(
             mf, discs, phase, f"Meshfree((boundary_nodes: {a.nodes}, grading: 3.0, law: NeoHookean, "
             "scheme: CentralDifference, k0: 300.0, rayleigh_alpha: 2.0))", "",
-            f"Fixed({ROW_STRAIN / RATE})", 1))
+            f"Fixed({ROW_STRAIN / RATE})", 1, a.nu))
         ref = curve(out / mf, 2 * R * discs)
         for law, (la, lb) in LAWS.items():
             name = f"case{case}_sdem_{law}"
             run(a.sdem, out, name, scenario(
                 name, discs, phase, "Full",
                 f"\n    contact: (a: {la}, b: {lb}, resolution_deg: 1.0, damping: 1.0),",
-                "FractionOfCritical(0.4)", 20))
+                "FractionOfCritical(0.4)", 20, a.nu))
             sd = curve(out / name, 2 * R * discs)
             for e in STRAINS:
                 r, s = at(ref, e), at(sd, e)
