@@ -72,6 +72,7 @@ MESHFREE_RUNS = [
     ("isotropic", 0.3, 24, 300),
     ("isotropic", 0.3, 32, 30),
     ("isotropic", 0.3, 48, 30),
+    ("isotropic", NU_MESHFREE_HIGH, 48, 30),
     ("oedometric", NU_MESHFREE_HIGH, 32, 30),
     ("oedometric", 0.3, 32, 30),
 ]
