@@ -527,7 +527,9 @@ def report(a, out):
                                             reference=ref_n, rms_rel_err_p=rms, max_rel_err_p=worst,
                                             rel_err_p_end=at_end["p_c"], cpu_s=run.cpu, cpu_s_ref=ref.cpu,
                                             points=count))
-                    chart_points.append((case, f"meshfree {n} nodes k0 {k0} (nu {nu_mf})", run.cpu, rms, "#000"))
+                    finer = ", finer: its difference" if n > ref_key[1] else ""
+                    chart_points.append((case, f"meshfree {n} nodes k0 {k0} (nu {nu_mf}{finer})", run.cpu, rms,
+                                         "#000"))
             # Nodal density alone: each density against the next finer one at the same penalty,
             # where the reference is not that finer run (its row is above).
             for (k0, n), run in sorted(mf.items()):
