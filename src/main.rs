@@ -106,8 +106,9 @@ enum Command {
         nu: Option<Vec<f64>>,
         /// An SDEM scenario to fit on (repeatable: one pair (a, b) for all of them), each paired
         /// in order with a --reference run of the same packing, walls, loading and material
-        /// (e.g. a meshfree run of tools/sdem_vs_meshfree.py). The error is p_c's relative
-        /// error at equal box strain over the loaded part (reference p_c >= 5e-3 E).
+        /// (e.g. a meshfree run of tools/sdem_vs_meshfree.py, or the one-disc runs of
+        /// tools/disc_column.py: a calibration with SDEM in the loop). The error is p_c's
+        /// relative error at equal box strain over the loaded part (reference p_c >= 5e-3 E).
         #[arg(long, value_name = "SCENARIO", requires = "reference",
               conflicts_with_all = ["nu", "final_side", "steps", "boundary_nodes"])]
         assembly: Vec<PathBuf>,
