@@ -16,15 +16,17 @@ calibration's own loading: one disc, the four walls in. If the law transfers fro
 to grain contacts, the two rows show the same ratios; if SDEM's grain model maps the box strain to
 the contact geometry as the meshfree disc does, the calibration's case shows ratios near 1.
 
-Outputs in --out: the runs (scenario, macro.csv) and `disc_column.csv` (case, law, strain,
+Outputs in --out: the runs (scenario, macro.csv, cost.txt; a finished run of the same scenario
+is not run again) and `disc_column.csv` (case, law, strain,
 sxx_ref, sxx, ratio).
 """
 
 import argparse
 import csv
 import pathlib
-import subprocess
 import sys
+
+from sdem_vs_meshfree import run_cached
 
 R = 0.012
 SHRINK = 0.999
@@ -58,16 +60,6 @@ Scenario(
 """
 
 
-def run(sdem, out, name, text):
-    path = out / f"{name}.ron"
-    run_dir = out / name
-    if path.exists() and path.read_text() == text and (run_dir / "summary.txt").exists():
-        return
-    path.write_text(text)
-    print(f"running {name} ...", flush=True)
-    subprocess.run([sdem, "run", str(path), "--out", str(run_dir), "--quiet", "--threads", "1"], check=True)
-
-
 def curve(run_dir, width0):
     rows = list(csv.DictReader(open(run_dir / "macro.csv")))
     return [(1 - float(r["box_width"]) / width0, float(r["sxx_c"])) for r in rows]
@@ -96,14 +88,14 @@ def main():
         lines = ["x,y,radius"] + [f"{(2 * k + 1) * R!r},{R!r},{R * SHRINK!r}" for k in range(discs)]
         (out / f"packing_{discs}.csv").write_text("\n".join(lines) + "\n")
         mf = f"case{case}_meshfree{a.nodes}"
-        run(a.sdem, out, mf, scenario(
+        run_cached(a.sdem, 1, out / mf, scenario(
             mf, discs, phase, f"Meshfree((boundary_nodes: {a.nodes}, grading: 3.0, law: NeoHookean, "
             "scheme: CentralDifference, k0: 300.0, rayleigh_alpha: 2.0))", "",
             f"Fixed({ROW_STRAIN / RATE})", 1, a.nu))
         ref = curve(out / mf, 2 * R * discs)
         for law, (la, lb) in LAWS.items():
             name = f"case{case}_sdem_{law}"
-            run(a.sdem, out, name, scenario(
+            run_cached(a.sdem, 1, out / name, scenario(
                 name, discs, phase, "Full",
                 f"\n    contact: (a: {la}, b: {lb}, resolution_deg: 1.0, damping: 1.0),",
                 "FractionOfCritical(0.4)", 20, a.nu))

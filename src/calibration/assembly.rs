@@ -556,8 +556,7 @@ pub fn run_assembly_calibration(
     options: &AssemblyOptions,
 ) -> Result<AssemblyReport, CalibrationError> {
     check(options)?;
-    let io = |path: PathBuf| move |source| CalibrationError::Io { path, source };
-    std::fs::create_dir_all(&options.out_dir).map_err(io(options.out_dir.clone()))?;
+    std::fs::create_dir_all(&options.out_dir).map_err(CalibrationError::io(&options.out_dir))?;
 
     let mut own: Vec<(f64, f64)> = Vec::new();
     for case in &options.cases {
@@ -585,23 +584,16 @@ pub fn run_assembly_calibration(
         .map(|&p| (Stage::Scenario, p))
         .chain(grid.iter().map(|&p| (Stage::Grid, p)))
         .collect();
-    let mut evaluations: Vec<Evaluation> = jobs
-        .par_iter()
-        .map(|&(stage, (a, b))| evaluator.evaluate(stage, a, b))
-        .collect();
     let mut report = AssemblyReport {
         labels: options.cases.iter().map(|c| c.label.clone()).collect(),
         scenario_laws: own,
         loaded_pressure: options.loaded_pressure,
-        evaluations: Vec::new(),
+        evaluations: jobs
+            .par_iter()
+            .map(|&(stage, (a, b))| evaluator.evaluate(stage, a, b))
+            .collect(),
     };
-    let start = evaluations
-        .iter()
-        .filter(|e| e.stage == Stage::Grid && e.pooled_rms().is_finite())
-        .min_by(|x, y| x.pooled_rms().total_cmp(&y.pooled_rms()))
-        .map(|e| (e.a, e.b));
-    let Some(start) = start else {
-        report.evaluations = evaluations;
+    let Some(start) = report.best_of_grid().map(|e| (e.a, e.b)) else {
         let why = report
             .evaluations
             .iter()
@@ -619,13 +611,12 @@ pub fn run_assembly_calibration(
         );
         refine(
             &evaluator,
-            &mut evaluations,
+            &mut report.evaluations,
             start,
             step,
             options.refine_evaluations,
         );
     }
-    report.evaluations = evaluations;
     write_outputs(&report, options)?;
     Ok(report)
 }
@@ -635,7 +626,6 @@ fn write_outputs(
     options: &AssemblyOptions,
 ) -> Result<(), CalibrationError> {
     use std::fmt::Write;
-    let io = |path: PathBuf| move |source| CalibrationError::Io { path, source };
     let mut csv = String::from(
         "stage,a,b,case,rms_rel_err_p,max_rel_err_p,rel_err_p_end,points,pooled_rms_rel_err_p,failure\n",
     );
@@ -666,9 +656,9 @@ fn write_outputs(
         }
     }
     let path = options.out_dir.join("assembly_fit.csv");
-    std::fs::write(&path, csv).map_err(io(path.clone()))?;
+    std::fs::write(&path, csv).map_err(CalibrationError::io(&path))?;
     let path = options.out_dir.join("assembly_fit.txt");
-    std::fs::write(&path, format!("{report}\n")).map_err(io(path.clone()))?;
+    std::fs::write(&path, format!("{report}\n")).map_err(CalibrationError::io(&path))?;
     Ok(())
 }
 

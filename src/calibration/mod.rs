@@ -113,6 +113,16 @@ pub enum CalibrationError {
     },
 }
 
+impl CalibrationError {
+    /// `map_err` for a failed write or directory creation at `path`.
+    pub(crate) fn io(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> Self + '_ {
+        move |source| CalibrationError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
 /// One load step of one compression.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CompressionStep {
@@ -437,10 +447,7 @@ pub fn run_calibration(options: &CalibrateOptions) -> Result<CalibrationReport, 
             compute_time: time,
         });
     }
-    std::fs::create_dir_all(&options.out_dir).map_err(|source| CalibrationError::Io {
-        path: options.out_dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&options.out_dir).map_err(CalibrationError::io(&options.out_dir))?;
     let mut csv_path = PathBuf::new();
     for (i, law) in laws.iter().enumerate() {
         let name = if i == 0 {
@@ -456,12 +463,8 @@ pub fn run_calibration(options: &CalibrateOptions) -> Result<CalibrationReport, 
     }
     let chart_path = if options.chart {
         let path = options.out_dir.join("calibration.svg");
-        std::fs::write(&path, chart::svg(&laws, options.final_box_side)).map_err(|source| {
-            CalibrationError::Io {
-                path: path.clone(),
-                source,
-            }
-        })?;
+        std::fs::write(&path, chart::svg(&laws, options.final_box_side))
+            .map_err(CalibrationError::io(&path))?;
         Some(path)
     } else {
         None
@@ -500,8 +503,5 @@ fn write_csv(path: &std::path::Path, law: &LawCalibration) -> Result<(), Calibra
             st.nu, st.h, st.force, st.contact_length, st.dn
         ));
     }
-    std::fs::write(path, s).map_err(|source| CalibrationError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    std::fs::write(path, s).map_err(CalibrationError::io(path))
 }
