@@ -44,6 +44,8 @@ pub enum StopWhen {
     /// Vertical engineering strain of the box in this phase, `1 - H/H0` (uniaxial and biaxial
     /// loading).
     VerticalStrain(f64),
+    /// Shear strain of a periodic cell in this phase, `∫ L_xy dt` (shear loading).
+    ShearStrain(f64),
     /// The first of several conditions.
     Any(Vec<StopWhen>),
 }
@@ -92,6 +94,17 @@ pub enum Phase {
     /// left and right walls out at the same rate, so that `d(width height)/dt = 0` (the area
     /// drifts by `(rate dt)^2` per step at most).
     Biaxial { rate: StrainRate, until: StopWhen },
+    /// Simple shear of a periodic cell at constant normal stress: the cell's velocity gradient
+    /// has `L_xy = rate` (x velocity growing with y), and its height is servoed to the normal
+    /// stress `syy` (compression positive) as a `Servo` phase servoes it: relative rate
+    /// `gain (s_c - syy) / E`, capped at `max_rate`. The width stays. Periodic cells only.
+    Shear {
+        rate: f64,
+        syy: f64,
+        gain: f64,
+        max_rate: f64,
+        until: StopWhen,
+    },
     /// Walls at rest.
     Relax { until: StopWhen },
 }
@@ -104,6 +117,7 @@ impl Phase {
             Phase::Servo { .. } => "servo",
             Phase::Uniaxial { .. } => "uniaxial",
             Phase::Biaxial { .. } => "biaxial",
+            Phase::Shear { .. } => "shear",
             Phase::Relax { .. } => "relax",
         }
     }
@@ -115,6 +129,7 @@ impl Phase {
             | Phase::Servo { until, .. }
             | Phase::Uniaxial { until, .. }
             | Phase::Biaxial { until, .. }
+            | Phase::Shear { until, .. }
             | Phase::Relax { until } => until,
         }
     }
@@ -131,6 +146,8 @@ pub struct LoadState {
     pub mean_diameter: f64,
     pub density: f64,
     pub young: f64,
+    /// Shear strain of a periodic cell since the start of the run (0 in a box).
+    pub shear_strain: f64,
 }
 
 impl LoadState {
@@ -190,8 +207,14 @@ pub struct LoadingProgram {
     pub phase_start_time: f64,
     /// Box size when the phase started.
     pub phase_start_size: (f64, f64),
-    /// Strain rate applied in the last step.
+    /// Strain rate applied in the last step (a shear phase: its shear rate).
     pub rate: f64,
+    /// Shear rate `L_xy` of a periodic cell for the next step (0 outside shear phases).
+    #[serde(default)]
+    pub shear_rate: f64,
+    /// Shear strain of the cell when the phase started.
+    #[serde(default)]
+    pub phase_start_shear_strain: f64,
 }
 
 impl LoadingProgram {
@@ -203,6 +226,8 @@ impl LoadingProgram {
             phase_start_time: 0.0,
             phase_start_size: box_size(walls),
             rate: 0.0,
+            shear_rate: 0.0,
+            phase_start_shear_strain: 0.0,
         }
     }
 
@@ -229,6 +254,7 @@ impl LoadingProgram {
         }
         let (width, height) = box_size(walls);
         self.rate = 0.0;
+        self.shear_rate = 0.0;
         match self.phases.get(self.current) {
             Some(Phase::Isotropic { rate, .. }) => {
                 let r = rate.value(state);
@@ -271,6 +297,19 @@ impl LoadingProgram {
                 walls[LEFT].velocity.x = -0.5 * r * width;
                 walls[RIGHT].velocity.x = 0.5 * r * width;
             }
+            Some(Phase::Shear {
+                rate,
+                syy,
+                gain,
+                max_rate,
+                ..
+            }) => {
+                let expand_y = (gain * (state.syy - syy) / state.young).clamp(-max_rate, *max_rate);
+                self.rate = *rate;
+                self.shear_rate = *rate;
+                walls[BOTTOM].velocity.y = -0.5 * expand_y * height;
+                walls[TOP].velocity.y = 0.5 * expand_y * height;
+            }
             Some(Phase::Relax { .. }) | None => {}
         }
     }
@@ -293,6 +332,9 @@ impl LoadingProgram {
             StopWhen::Time(t) => time - self.phase_start_time >= *t * (1.0 - 1e-12),
             StopWhen::Strain(e) => 1.0 - box_size(walls).0 / self.phase_start_size.0 >= *e,
             StopWhen::VerticalStrain(e) => 1.0 - box_size(walls).1 / self.phase_start_size.1 >= *e,
+            StopWhen::ShearStrain(g) => {
+                (state.shear_strain - self.phase_start_shear_strain).abs() >= *g
+            }
             StopWhen::Any(list) => list
                 .iter()
                 .any(|u| self.reached(u, step, time, walls, state)),
@@ -309,6 +351,7 @@ impl LoadingProgram {
             self.phase_start_step = step;
             self.phase_start_time = time;
             self.phase_start_size = box_size(walls);
+            self.phase_start_shear_strain = state.shear_strain;
             true
         } else {
             false
@@ -357,6 +400,7 @@ mod tests {
             mean_diameter: 0.024,
             density: 1.0,
             young: 1.0,
+            shear_strain: 0.0,
         };
         let r = rate.value(&s);
         assert!((s.inertial_number(r) - 1e-3).abs() < 1e-15);

@@ -15,6 +15,7 @@
 //!
 //! Units: lengths as the scenario's; L in 1/time. Stress tension positive, as SPEC §3.
 
+use super::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size};
 use glam::{DMat2, DVec2};
 
 /// Why a cell is refused.
@@ -151,6 +152,91 @@ impl PeriodicCell {
         }
         self.matrix.y_axis -= k * self.h1();
         true
+    }
+}
+
+/// A world's periodic boundary. The loading program drives the cell as it drives a box: through
+/// the velocities of four virtual walls (in the order of [`super::walls::box_walls`]), which
+/// meet no grain; they give the cell's origin (left, bottom), its width along x and its height
+/// along y. The shear of the cell is kept here: `h2 = (tilt, height)`, sheared at `shear_rate`
+/// (the velocity gradient's `L_xy`, set by a shear phase).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PeriodicBoundary {
+    /// x component of h2 (length).
+    pub tilt: f64,
+    /// `L_xy = d v_x / d y` of the affine field (1/time).
+    pub shear_rate: f64,
+    /// Shear strain `∫ L_xy dt` since the start of the run, remaps not undone.
+    pub shear_strain: f64,
+}
+
+impl PeriodicBoundary {
+    /// The cell that `walls` and the tilt describe.
+    pub fn cell(&self, walls: &[Wall]) -> PeriodicCell {
+        let (width, height) = box_size(walls);
+        PeriodicCell {
+            origin: DVec2::new(walls[LEFT].point.x, walls[BOTTOM].point.y),
+            matrix: DMat2::from_cols(DVec2::new(width, 0.0), DVec2::new(self.tilt, height)),
+        }
+    }
+
+    /// The velocity gradient L of the affine field: the walls' strain rates on the diagonal,
+    /// the shear rate above it.
+    pub fn velocity_gradient(&self, walls: &[Wall]) -> DMat2 {
+        let (width, height) = box_size(walls);
+        let l_xx = (walls[RIGHT].velocity.x - walls[LEFT].velocity.x) / width;
+        let l_yy = (walls[TOP].velocity.y - walls[BOTTOM].velocity.y) / height;
+        DMat2::from_cols(DVec2::new(l_xx, 0.0), DVec2::new(self.shear_rate, l_yy))
+    }
+
+    /// One step of the cell: the walls move by their velocity × dt (as in a box), h2's tilt
+    /// follows `dH/dt = L H`, and past a tilt of half the width the cell is remapped to the
+    /// equivalent lattice cell. Returns the motion, whose `remapped` says that the images of
+    /// the pairs changed.
+    pub fn advance(&mut self, walls: &mut [Wall], dt: f64) -> CellMotion {
+        let before = self.cell(walls);
+        let velocity_gradient = self.velocity_gradient(walls);
+        self.tilt +=
+            dt * (velocity_gradient.x_axis.x * self.tilt + self.shear_rate * before.h2().y);
+        self.shear_strain += self.shear_rate * dt;
+        for wall in walls.iter_mut() {
+            wall.point += wall.velocity * dt;
+        }
+        let after = self.cell(walls);
+        let map = after.matrix * before.matrix.inverse();
+        let turns = (self.tilt / after.h1().x).round();
+        if turns != 0.0 {
+            self.tilt -= turns * after.h1().x;
+        }
+        CellMotion {
+            before,
+            current: self.cell(walls),
+            map,
+            velocity_gradient,
+            remapped: turns != 0.0,
+        }
+    }
+}
+
+/// How the cell moved over one step ([`PeriodicBoundary::advance`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellMotion {
+    pub before: PeriodicCell,
+    /// The cell after the step (and its remap, if any: the same lattice, the same origin).
+    pub current: PeriodicCell,
+    /// `H_after H_before^-1` (H_after before any remap): a point of the affine field moves
+    /// from x to `current.origin + map (x - before.origin)`.
+    pub map: DMat2,
+    pub velocity_gradient: DMat2,
+    /// The cell was remapped after the step (the pairs' images are stale).
+    pub remapped: bool,
+}
+
+impl CellMotion {
+    /// Where the affine field carries a point over the step (its reduced coordinates kept).
+    #[inline]
+    pub fn carry(&self, x: DVec2) -> DVec2 {
+        self.current.origin + self.map * (x - self.before.origin)
     }
 }
 

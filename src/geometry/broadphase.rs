@@ -6,7 +6,8 @@
 //! ordered (a stable counting sort into cells, pairs sorted by (i, j)), so the list and every
 //! sum over it are the same whatever the thread count.
 
-use glam::DVec2;
+use crate::boundary::periodic::PeriodicCell;
+use glam::{DMat2, DVec2};
 use rayon::prelude::*;
 
 #[derive(Debug, Clone, Default)]
@@ -19,7 +20,13 @@ pub struct NeighborList {
     /// the pairs that contain g, in increasing order.
     pub grain_offsets: Vec<u32>,
     pub grain_pairs: Vec<u32>,
+    /// Periodic cell only: for pair `[i, j]`, the image `n` of j that meets i (its centre is
+    /// `x_j + H n`). Empty without a cell.
+    pub images: Vec<[i64; 2]>,
+    /// The centres at the last build; in a periodic cell their reduced coordinates.
     reference_centers: Vec<DVec2>,
+    /// Periodic cell only: the cell matrix at the last build.
+    reference_matrix: Option<DMat2>,
     reference_reach: Vec<f64>,
     /// Number of builds so far (a diagnostic).
     pub builds: u64,
@@ -33,9 +40,15 @@ impl NeighborList {
         }
     }
 
+    /// Forgets the last build: the next check asks for a new one (after a cell remap, whose
+    /// images change).
+    pub fn invalidate(&mut self) {
+        self.reference_centers.clear();
+    }
+
     /// Whether some grain moved or grew enough since the last build that a pair may be missing.
     pub fn needs_rebuild(&self, centers: &[DVec2], reach: &[f64]) -> bool {
-        if self.reference_centers.len() != centers.len() {
+        if self.reference_centers.len() != centers.len() || self.reference_matrix.is_some() {
             return true;
         }
         let limit = 0.5 * self.skin;
@@ -50,19 +63,52 @@ impl NeighborList {
             .any(|((c, r), (c0, r0))| c.distance(*c0) + (r - r0).max(0.0) >= limit)
     }
 
+    /// The periodic version of [`needs_rebuild`](Self::needs_rebuild), for a cell that deforms.
+    ///
+    /// The centres move with the cell's affine deformation (`F = H H0^-1` since the build) plus
+    /// their own displacement `H Δs` (Δs: the change of reduced coordinates, to the nearest
+    /// lattice shift). For a pair of separation `d0 >= r_i + r_j + skin` at the build, the gap
+    /// can shrink by at most `|H Δs_i| + |H Δs_j| + |F - I| |d0|` plus the growths; at `d0` near
+    /// the listing limit, a pair not listed cannot have closed its gap while
+    /// `2 max(|H Δs| + growth) + |F - I| (2 max reach + skin) < skin`.
+    pub fn needs_rebuild_periodic(
+        &self,
+        centers: &[DVec2],
+        reach: &[f64],
+        cell: &PeriodicCell,
+    ) -> bool {
+        let Some(reference_matrix) = self.reference_matrix else {
+            return true;
+        };
+        if self.reference_centers.len() != centers.len() {
+            return true;
+        }
+        let strain = cell.matrix * reference_matrix.inverse() - DMat2::IDENTITY;
+        let strain_norm = strain.x_axis.length_squared() + strain.y_axis.length_squared();
+        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        let budget = 0.5 * (self.skin - strain_norm.sqrt() * (2.0 * max_reach + self.skin));
+        if budget <= 0.0 {
+            return true;
+        }
+        centers
+            .par_iter()
+            .zip(reach.par_iter())
+            .zip(
+                self.reference_centers
+                    .par_iter()
+                    .zip(self.reference_reach.par_iter()),
+            )
+            .any(|((c, r), (s0, r0))| {
+                let ds = cell.reduced(*c) - *s0;
+                let moved = cell.matrix * (ds - ds.round());
+                moved.length() + (r - r0).max(0.0) >= budget
+            })
+    }
+
     /// Rebuilds the list for grains with the given centres and bounding radii.
     pub fn build(&mut self, centers: &[DVec2], reach: &[f64]) {
         let n = centers.len();
-        self.builds += 1;
-        self.reference_centers.clear();
-        self.reference_centers.extend_from_slice(centers);
-        self.reference_reach.clear();
-        self.reference_reach.extend_from_slice(reach);
-        self.pairs.clear();
-        self.grain_pairs.clear();
-        self.grain_offsets.clear();
-        self.grain_offsets.resize(n + 1, 0);
-        if n == 0 {
+        if !self.start_build(centers, reach) {
             return;
         }
         let max_reach = reach.iter().cloned().fold(0.0, f64::max);
@@ -125,7 +171,122 @@ impl NeighborList {
         for (i, list) in neighbours.iter().enumerate() {
             self.pairs.extend(list.iter().map(|&j| [i as u32, j]));
         }
-        // Transpose: the pairs of each grain, in increasing pair order.
+        self.index_pairs_by_grain(n);
+    }
+
+    /// Resets the list for a build; false when there are no grains.
+    fn start_build(&mut self, centers: &[DVec2], reach: &[f64]) -> bool {
+        let n = centers.len();
+        self.builds += 1;
+        self.reference_centers.clear();
+        self.reference_centers.extend_from_slice(centers);
+        self.reference_reach.clear();
+        self.reference_reach.extend_from_slice(reach);
+        self.reference_matrix = None;
+        self.pairs.clear();
+        self.images.clear();
+        self.grain_pairs.clear();
+        self.grain_offsets.clear();
+        self.grain_offsets.resize(n + 1, 0);
+        n > 0
+    }
+
+    /// Rebuilds the list in a periodic cell: each pair with the image of its second grain
+    /// nearest the first ([`PeriodicCell::minimum_image`]), in [`images`](Self::images).
+    ///
+    /// The grid is laid in reduced coordinates, `cols` bins across h1 and `rows` across h2,
+    /// each at least the interaction range wide across the cell (the cell's widths over the
+    /// range, rounded down), so that every pair within range lies in neighbouring bins, the
+    /// bins wrapping round the cell. The cell must be at least twice the range wide
+    /// ([`PeriodicCell::check_range`]).
+    pub fn build_periodic(&mut self, centers: &[DVec2], reach: &[f64], cell: &PeriodicCell) {
+        let n = centers.len();
+        if !self.start_build(centers, reach) {
+            self.reference_matrix = Some(cell.matrix);
+            return;
+        }
+        let inverse = cell.matrix.inverse();
+        for c in &mut self.reference_centers {
+            *c = inverse * (*c - cell.origin);
+        }
+        self.reference_matrix = Some(cell.matrix);
+        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        let range = (2.0 * max_reach + self.skin).max(f64::MIN_POSITIVE);
+        let [width1, width2] = cell.widths();
+        let cols = ((width1 / range) as usize).clamp(1, 1 << 15);
+        let rows = ((width2 / range) as usize).clamp(1, 1 << 15);
+        let reduced = &self.reference_centers;
+        let cell_of = |s: DVec2| -> (usize, usize) {
+            let f = s - s.floor();
+            (
+                ((f.x * cols as f64) as usize).min(cols - 1),
+                ((f.y * rows as f64) as usize).min(rows - 1),
+            )
+        };
+        let mut cell_start = vec![0u32; cols * rows + 1];
+        for s in reduced {
+            let (cx, cy) = cell_of(*s);
+            cell_start[cy * cols + cx + 1] += 1;
+        }
+        for k in 0..cols * rows {
+            cell_start[k + 1] += cell_start[k];
+        }
+        let mut fill = cell_start.clone();
+        let mut cell_grains = vec![0u32; n];
+        for (g, s) in reduced.iter().enumerate() {
+            let (cx, cy) = cell_of(*s);
+            let slot = &mut fill[cy * cols + cx];
+            cell_grains[*slot as usize] = g as u32;
+            *slot += 1;
+        }
+        let skin = self.skin;
+        // With fewer than 3 bins across, the neighbouring bins repeat: each grain is met once.
+        let wrap = |k: usize, delta: isize, count: usize| -> usize {
+            (k as isize + delta).rem_euclid(count as isize) as usize
+        };
+        let neighbours: Vec<Vec<(u32, [i64; 2])>> = (0..n)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| {
+                let ci = centers[i];
+                let (cx, cy) = cell_of(reduced[i]);
+                let mut found = Vec::new();
+                let mut bins = Vec::with_capacity(9);
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        bins.push(wrap(cy, dy, rows) * cols + wrap(cx, dx, cols));
+                    }
+                }
+                bins.sort_unstable();
+                bins.dedup();
+                for k in bins {
+                    for &j in &cell_grains[cell_start[k] as usize..cell_start[k + 1] as usize] {
+                        if (j as usize) <= i {
+                            continue;
+                        }
+                        // `d = x_j - x_i - H m`: the image of j nearest i is at `x_j - H m`.
+                        let (d, [m1, m2]) = cell.minimum_image(centers[j as usize] - ci);
+                        let limit = reach[i] + reach[j as usize] + skin;
+                        if d.length_squared() < limit * limit {
+                            found.push((j, [-m1, -m2]));
+                        }
+                    }
+                }
+                found.sort_unstable_by_key(|(j, _)| *j);
+                found
+            })
+            .collect();
+        for (i, list) in neighbours.iter().enumerate() {
+            for &(j, image) in list {
+                self.pairs.push([i as u32, j]);
+                self.images.push(image);
+            }
+        }
+        self.index_pairs_by_grain(n);
+    }
+
+    /// Fills `grain_offsets` and `grain_pairs` from `pairs`.
+    fn index_pairs_by_grain(&mut self, n: usize) {
         for [i, j] in &self.pairs {
             self.grain_offsets[*i as usize + 1] += 1;
             self.grain_offsets[*j as usize + 1] += 1;
@@ -140,6 +301,17 @@ impl NeighborList {
                 self.grain_pairs[fill[g] as usize] = p as u32;
                 fill[g] += 1;
             }
+        }
+    }
+
+    /// After grains were wrapped back into the cell (grain g moved by `-H wraps[g]`, as
+    /// [`PeriodicCell::wrap`] moves it), the image of each pair that keeps its branch vector
+    /// `x_j + H n - x_i`.
+    pub fn follow_wraps(&mut self, wraps: &[[i64; 2]]) {
+        for ([i, j], image) in self.pairs.iter().zip(self.images.iter_mut()) {
+            let (wi, wj) = (wraps[*i as usize], wraps[*j as usize]);
+            image[0] += wj[0] - wi[0];
+            image[1] += wj[1] - wi[1];
         }
     }
 
@@ -183,5 +355,56 @@ mod tests {
         let mut moved = centers.clone();
         moved[7].x += 0.006;
         assert!(list.needs_rebuild(&moved, &reach));
+    }
+}
+
+#[cfg(test)]
+mod periodic_tests {
+    use super::*;
+
+    /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
+    /// within range, found by brute force over all pairs, each with that image.
+    #[test]
+    fn the_periodic_list_finds_exactly_the_pairs_of_a_brute_force_search() {
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+        let mut next = || crate::sample::unit_random(&mut rng);
+        for (h1, h2, count) in [
+            (DVec2::new(1.0, 0.0), DVec2::new(0.0, 0.8), 400),
+            (DVec2::new(1.0, 0.0), DVec2::new(0.45, 0.8), 400),
+            (DVec2::new(0.4, 0.0), DVec2::new(-0.15, 0.35), 60),
+        ] {
+            let cell = PeriodicCell::new(DVec2::new(-0.3, 0.2), h1, h2).unwrap();
+            // Centres anywhere, some outside the cell.
+            let centers: Vec<DVec2> = (0..count)
+                .map(|_| cell.position(DVec2::new(next() * 1.4 - 0.2, next() * 1.4 - 0.2)))
+                .collect();
+            let reach: Vec<f64> = (0..count).map(|_| 0.02 + 0.03 * next()).collect();
+            let skin = 0.01;
+            cell.check_range(2.0 * 0.05 + skin).unwrap();
+            let mut list = NeighborList::new(skin);
+            list.build_periodic(&centers, &reach, &cell);
+            let mut brute = Vec::new();
+            for i in 0..count {
+                for j in i + 1..count {
+                    let (d, [m1, m2]) = cell.minimum_image(centers[j] - centers[i]);
+                    let limit = reach[i] + reach[j] + skin;
+                    if d.length() < limit {
+                        assert!(
+                            (centers[j] + cell.image_shift([-m1, -m2]) - centers[i] - d).length()
+                                < 1e-12
+                        );
+                        brute.push(([i as u32, j as u32], [-m1, -m2]));
+                    }
+                }
+            }
+            let found: Vec<([u32; 2], [i64; 2])> = list
+                .pairs
+                .iter()
+                .copied()
+                .zip(list.images.iter().copied())
+                .collect();
+            assert_eq!(found, brute, "cell {h1:?} {h2:?}");
+            assert!(!list.needs_rebuild_periodic(&centers, &reach, &cell));
+        }
     }
 }

@@ -30,6 +30,9 @@ pub enum Instability {
     },
     /// A grain moves faster than the elastic wave speed.
     Runaway { step: u64, grain: usize, speed: f64 },
+    /// The periodic cell became narrower than twice the interaction range (largest grain
+    /// diameter + neighbour skin): a grain could meet two images of another.
+    CellTooNarrow { step: u64, width: f64, range: f64 },
 }
 
 fn other_name(other: &Option<usize>) -> String {
@@ -81,6 +84,13 @@ impl fmt::Display for Instability {
                 f,
                 "step {step}: grain {grain} moves at {speed:.3e}, faster than the elastic wave speed \
                  sqrt(E/rho): energy blow-up; reduce the time step"
+            ),
+            Instability::CellTooNarrow { step, width, range } => write!(
+                f,
+                "step {step}: the periodic cell is {width:.4e} wide across, under twice the \
+                 interaction range {range:.4e} (largest grain diameter + neighbour skin): a grain \
+                 would meet two images of another; use more grains or a larger cell, or compress \
+                 less"
             ),
         }
     }

@@ -15,6 +15,7 @@ pub mod parameters;
 pub use instability::Instability;
 pub use parameters::Parameters;
 
+use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell};
 use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
@@ -107,11 +108,19 @@ pub struct StepTotals {
     pub capped_contacts: u64,
     /// Grains at each level (Rigid, Volumetric, Full) for the next step.
     pub level_counts: [u64; 3],
+    /// Periodic cell only: the contacts' stress over the cell, `(1/A) sum sym(f_i ⊗ d_ij)`
+    /// (xx, yy, xy), tension positive (SPEC §14). Zero in a box.
+    pub cell_stress: [f64; 3],
+    /// Periodic cell only: the kinetic stress `-(1/A) sum m v ⊗ v` of the grains' velocities
+    /// relative to the affine field (xx, yy, xy), tension positive.
+    pub kinetic_stress: [f64; 3],
 }
 
 #[derive(Debug, Clone, Copy, Default)]
 struct ChunkSums {
     totals: StepTotals,
+    /// `sum m v ⊗ v` (xx, yy, xy).
+    momentum_flux: [f64; 3],
     contact_ends: u64,
     failure: Option<Instability>,
 }
@@ -122,7 +131,11 @@ pub struct World {
     pub params: Parameters,
     pub table: ContourTable,
     pub grains: Vec<Grain>,
+    /// The box walls; in a periodic cell, the four virtual walls that drive the cell (see
+    /// [`PeriodicBoundary`]), which meet no grain.
     pub walls: Vec<Wall>,
+    /// The periodic cell in place of walls, if any.
+    pub periodic: Option<PeriodicBoundary>,
     pub time: f64,
     pub step: u64,
     pub neighbors: NeighborList,
@@ -135,6 +148,8 @@ pub struct World {
     /// Per-step scratch for the broad phase (kept to avoid an allocation every step).
     centers: Vec<DVec2>,
     reach: Vec<f64>,
+    /// Per-step scratch of a periodic cell: the image shift each grain was wrapped by.
+    wraps: Vec<[i64; 2]>,
 }
 
 impl World {
@@ -155,6 +170,7 @@ impl World {
             table,
             grains,
             walls,
+            periodic: None,
             time: 0.0,
             step: 0,
             neighbors: NeighborList::new(skin),
@@ -165,6 +181,7 @@ impl World {
             levels: vec![GrainLevel::new(start); n],
             centers: Vec::with_capacity(n),
             reach: Vec::with_capacity(n),
+            wraps: Vec::new(),
         };
         world.count_levels();
         world
@@ -201,8 +218,19 @@ impl World {
         }
     }
 
+    /// The periodic cell now, if the world has one.
+    pub fn cell(&self) -> Option<PeriodicCell> {
+        self.periodic.map(|p| p.cell(&self.walls))
+    }
+
+    /// Makes the world periodic: the walls become the virtual walls of the cell they bound.
+    pub fn with_periodic(mut self, periodic: PeriodicBoundary) -> Self {
+        self.periodic = Some(periodic);
+        self
+    }
+
     /// Recomputes shapes, velocity fields and the neighbour list for the current state.
-    fn prepare(&mut self) {
+    fn prepare(&mut self) -> Result<(), Instability> {
         let density = self.params.material.density;
         self.grains
             .par_iter()
@@ -224,10 +252,30 @@ impl World {
         self.reach
             .extend(self.frames.iter().map(|f| f.shape.bounding_radius));
         let (centers, reach) = (&self.centers, &self.reach);
-        if self.neighbors.needs_rebuild(centers, reach) {
+        let cell = self.cell();
+        let rebuild = match &cell {
+            Some(cell) => self.neighbors.needs_rebuild_periodic(centers, reach, cell),
+            None => self.neighbors.needs_rebuild(centers, reach),
+        };
+        if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
             let old_contacts = std::mem::take(&mut self.pair_contacts);
-            self.neighbors.build(centers, reach);
+            match &cell {
+                Some(cell) => {
+                    let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+                    let range = 2.0 * max_reach + self.neighbors.skin;
+                    let width = cell.widths()[0].min(cell.widths()[1]);
+                    if cell.check_range(range).is_err() {
+                        return Err(Instability::CellTooNarrow {
+                            step: self.step,
+                            width,
+                            range,
+                        });
+                    }
+                    self.neighbors.build_periodic(centers, reach, cell);
+                }
+                None => self.neighbors.build(centers, reach),
+            }
             // Pair indices change with the list: carry each surviving pair's search hint over
             // (both lists are sorted by (i, j)).
             self.pair_contacts = vec![PairContact::default(); self.neighbors.pairs.len()];
@@ -243,29 +291,45 @@ impl World {
         }
         self.pair_contacts
             .resize(self.neighbors.pairs.len(), PairContact::default());
+        Ok(())
     }
 
-    /// Contact geometry and forces of every candidate pair.
-    fn compute_pair_contacts(&mut self) -> Result<u64, Instability> {
+    /// Contact geometry and forces of every candidate pair; the capped contacts and, in a
+    /// periodic cell, `sum sym(f_i ⊗ d_ij)` (xx, yy, xy).
+    fn compute_pair_contacts(&mut self) -> Result<(u64, [f64; 3]), Instability> {
         let params = &self.params;
         let table = &self.table;
         let frames = &self.frames;
         let pairs = &self.neighbors.pairs;
+        let images = &self.neighbors.images;
         let step = self.step;
-        let chunk_results: Vec<(u64, Option<Instability>)> = self
+        // In a periodic cell: the cell, and the velocity gradient of the affine field, which
+        // adds `L d` to the relative velocity of a pair of branch vector d.
+        let periodic = self
+            .periodic
+            .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
+        let chunk_results: Vec<(u64, [f64; 3], Option<Instability>)> = self
             .pair_contacts
             .par_chunks_mut(PAIR_CHUNK)
             .enumerate()
             .map(|(chunk, out)| {
                 let mut capped = 0;
+                let mut moment = [0.0; 3];
                 let mut failure = None;
                 for (k, slot) in out.iter_mut().enumerate() {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
+                    // The second grain, or its image that meets the first.
+                    let mut shape_j = fj.shape;
+                    let mut affine_rate = DVec2::ZERO;
+                    if let Some((cell, velocity_gradient)) = &periodic {
+                        shape_j.center += cell.image_shift(images[p]);
+                        affine_rate = *velocity_gradient * (shape_j.center - fi.shape.center);
+                    }
                     let mut hint = slot.hint;
                     *slot = PairContact::default();
-                    let overlap = grain_grain_hinted(table, &fi.shape, &fj.shape, &mut hint);
+                    let overlap = grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint);
                     slot.hint = hint;
                     match overlap {
                         Overlap::Separate => {}
@@ -287,20 +351,31 @@ impl World {
                                 });
                             }
                             Ok(response) => {
-                                let gap_rate = (fj.velocity_at(c.point) - fi.velocity_at(c.point))
+                                let velocity_j =
+                                    fj.velocity + fj.velocity_gradient * (c.point - shape_j.center);
+                                let gap_rate = (velocity_j - fi.velocity_at(c.point) + affine_rate)
                                     .dot(c.normal);
                                 let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
                                 capped += response.capped as u64;
+                                let force = damped_normal_force(
+                                    response.force,
+                                    response.stiffness,
+                                    effective_mass,
+                                    params.contact_damping,
+                                    gap_rate,
+                                );
+                                if periodic.is_some() {
+                                    let on_first = force * c.normal;
+                                    let branch = shape_j.center - fi.shape.center;
+                                    moment[0] += on_first.x * branch.x;
+                                    moment[1] += on_first.y * branch.y;
+                                    moment[2] +=
+                                        0.5 * (on_first.x * branch.y + on_first.y * branch.x);
+                                }
                                 *slot = PairContact {
                                     active: true,
                                     normal: c.normal,
-                                    force: damped_normal_force(
-                                        response.force,
-                                        response.stiffness,
-                                        effective_mass,
-                                        params.contact_damping,
-                                        gap_rate,
-                                    ),
+                                    force,
                                     point: c.point,
                                     length: c.length,
                                     normal_gap: c.normal_gap,
@@ -313,28 +388,34 @@ impl World {
                         },
                     }
                 }
-                (capped, failure)
+                (capped, moment, failure)
             })
             .collect();
         let mut capped = 0;
-        for (c, failure) in chunk_results {
+        let mut moment = [0.0; 3];
+        for (c, m, failure) in chunk_results {
             if let Some(f) = failure {
                 return Err(f);
             }
             capped += c;
+            for (sum, x) in moment.iter_mut().zip(m) {
+                *sum += x;
+            }
         }
-        Ok(capped)
+        Ok((capped, moment))
     }
 
     /// Advances the world by one time step.
     pub fn step(&mut self) -> Result<&StepTotals, Instability> {
-        self.prepare();
-        let capped_pairs = self.compute_pair_contacts()?;
+        self.prepare()?;
+        let (capped_pairs, contact_moment) = self.compute_pair_contacts()?;
 
         let params = &self.params;
         let table = &self.table;
         let frames = &self.frames;
-        let walls = &self.walls;
+        let cell = self.cell();
+        // A periodic cell's virtual walls meet no grain.
+        let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
         let pair_contacts = &self.pair_contacts;
         let step = self.step;
@@ -361,12 +442,21 @@ impl World {
                             continue;
                         }
                         let first = neighbors.pairs[p as usize][0] as usize == g;
-                        let (force, cap) = if first {
-                            (c.force * c.normal, c.cap_area_first)
+                        let (force, cap, center) = if first {
+                            (c.force * c.normal, c.cap_area_first, frame.shape.center)
                         } else {
-                            (-c.force * c.normal, c.cap_area_second)
+                            // The contact point lies at the image of this grain that met the first.
+                            let image = match &cell {
+                                Some(cell) => cell.image_shift(neighbors.images[p as usize]),
+                                None => DVec2::ZERO,
+                            };
+                            (
+                                -c.force * c.normal,
+                                c.cap_area_second,
+                                frame.shape.center + image,
+                            )
                         };
-                        load.add(force, c.point - frame.shape.center, cap);
+                        load.add(force, c.point - center, cap);
                         load.contacts += 1;
                     }
                     for (w, wall) in walls.iter().enumerate() {
@@ -422,6 +512,13 @@ impl World {
                     }
                     sums.totals.grain_area += update.area;
                     sums.totals.kinetic_energy += grain.kinetic_energy(params.material.density);
+                    if cell.is_some() {
+                        let m = grain.mass(params.material.density);
+                        let v = grain.velocity;
+                        sums.momentum_flux[0] += m * v.x * v.x;
+                        sums.momentum_flux[1] += m * v.y * v.y;
+                        sums.momentum_flux[2] += m * v.x * v.y;
+                    }
                     sums.totals.elastic_energy += update.elastic_energy;
                     sums.contact_ends += load.contacts as u64;
                 }
@@ -434,9 +531,13 @@ impl World {
             ..Default::default()
         };
         let mut contact_ends = 0;
+        let mut momentum_flux = [0.0; 3];
         for sums in &chunk_sums {
             if let Some(f) = sums.failure {
                 return Err(f);
+            }
+            for (sum, x) in momentum_flux.iter_mut().zip(sums.momentum_flux) {
+                *sum += x;
             }
             for w in 0..MAX_WALLS {
                 totals.wall_force[w] += sums.totals.wall_force[w];
@@ -452,8 +553,20 @@ impl World {
         }
         totals.contacts = contact_ends / 2;
         let dt = self.params.dt;
-        for wall in &mut self.walls {
-            wall.point += wall.velocity * dt;
+        match self.periodic.as_mut() {
+            Some(periodic) => {
+                let area_before = periodic.cell(&self.walls).area();
+                let motion = periodic.advance(&mut self.walls, dt);
+                let area = motion.current.area();
+                totals.cell_stress = contact_moment.map(|m| m / area_before);
+                totals.kinetic_stress = momentum_flux.map(|m| -m / area);
+                self.follow_cell(&motion);
+            }
+            None => {
+                for wall in &mut self.walls {
+                    wall.point += wall.velocity * dt;
+                }
+            }
         }
         self.time += dt;
         self.step += 1;
@@ -461,6 +574,31 @@ impl World {
         // The next step's time step, from the levels the grains chose (a fixed-order sum).
         self.apply_adaptive_dt();
         Ok(&self.totals)
+    }
+
+    /// Carries the grain centres with the cell's affine deformation over the step, wraps them
+    /// back into the cell and keeps the pairs' images (or has the list rebuilt after a remap).
+    /// Velocities stay relative to the affine field.
+    fn follow_cell(&mut self, motion: &CellMotion) {
+        self.wraps.resize(self.grains.len(), [0, 0]);
+        let wrapped = self
+            .grains
+            .par_iter_mut()
+            .zip(self.wraps.par_iter_mut())
+            .with_min_len(GRAIN_CHUNK)
+            .map(|(g, wrap)| {
+                let (center, image) = motion.current.wrap(motion.carry(g.center));
+                g.center = center;
+                *wrap = image;
+                image != [0, 0]
+            })
+            .filter(|&w| w)
+            .count();
+        if motion.remapped {
+            self.neighbors.invalidate();
+        } else if wrapped > 0 {
+            self.neighbors.follow_wraps(&self.wraps);
+        }
     }
 
     /// Moves every grain centre with the homogeneous deformation that maps the box

@@ -64,12 +64,21 @@ impl Measures {
     /// The header before the level columns (macro.csv of sdem before the adaptive level).
     pub const HEADER_WITHOUT_LEVELS: &'static str = columns_before_levels!();
 
-    /// Wall stresses and packing fraction only: cheap enough for every step.
+    /// Wall stresses (in a periodic cell, the cell's contact stresses, compression positive)
+    /// and packing fraction only: cheap enough for every step.
     pub fn box_state(world: &World) -> (f64, f64, f64, f64, f64) {
         let (width, height) = box_size(&world.walls);
-        let f = &world.totals.wall_force;
-        let sxx = 0.5 * (f[LEFT] + f[RIGHT]) / height;
-        let syy = 0.5 * (f[BOTTOM] + f[TOP]) / width;
+        let (sxx, syy) = if world.periodic.is_some() {
+            let s = &world.totals.cell_stress;
+            (-s[0], -s[1])
+        } else {
+            let f = &world.totals.wall_force;
+            (
+                0.5 * (f[LEFT] + f[RIGHT]) / height,
+                0.5 * (f[BOTTOM] + f[TOP]) / width,
+            )
+        };
+        // A sheared cell keeps the area width × height.
         let phi = world.totals.grain_area / (width * height);
         (phi, sxx, syy, width, height)
     }
@@ -84,6 +93,7 @@ impl Measures {
             mean_diameter,
             density: world.params.material.density,
             young: world.params.material.young,
+            shear_strain: world.periodic.map_or(0.0, |p| p.shear_strain),
         }
     }
 

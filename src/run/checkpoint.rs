@@ -29,6 +29,7 @@
 use super::meshfree_checkpoint::{MeshfreeCheckpoint, MeshfreeStored};
 use super::{Jamming, LoopState};
 use crate::boundary::loading::LoadingProgram;
+use crate::boundary::periodic::PeriodicBoundary;
 use crate::boundary::walls::Wall;
 use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::integration::{MAX_WALLS, StepTotals};
@@ -193,6 +194,9 @@ pub struct TotalsBits {
     /// run recounts them from the grains' levels).
     #[serde(default)]
     pub level_counts: [u64; 3],
+    /// Periodic cell only (absent in a box): the cell's contact and kinetic stresses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell_stresses: Option<[[Bits; 3]; 2]>,
 }
 
 impl From<&StepTotals> for TotalsBits {
@@ -205,6 +209,12 @@ impl From<&StepTotals> for TotalsBits {
             contacts: t.contacts,
             capped_contacts: t.capped_contacts,
             level_counts: t.level_counts,
+            cell_stresses: (t.cell_stress != [0.0; 3] || t.kinetic_stress != [0.0; 3]).then(|| {
+                [
+                    t.cell_stress.map(Bits::from),
+                    t.kinetic_stress.map(Bits::from),
+                ]
+            }),
         }
     }
 }
@@ -226,6 +236,8 @@ impl TotalsBits {
             contacts: self.contacts,
             capped_contacts: self.capped_contacts,
             level_counts: self.level_counts,
+            cell_stress: self.cell_stresses.map_or([0.0; 3], |s| s[0].map(f64::from)),
+            kinetic_stress: self.cell_stresses.map_or([0.0; 3], |s| s[1].map(f64::from)),
         })
     }
 }
@@ -271,6 +283,10 @@ pub struct ProgramBits {
     pub phase_start_time: Bits,
     pub phase_start_size: [Bits; 2],
     pub rate: Bits,
+    /// Shear phases of a periodic cell (absent otherwise): the shear rate of the last step and
+    /// the cell's shear strain when the phase started.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shear: Option<[Bits; 2]>,
 }
 
 impl From<&LoadingProgram> for ProgramBits {
@@ -281,6 +297,8 @@ impl From<&LoadingProgram> for ProgramBits {
             phase_start_time: p.phase_start_time.into(),
             phase_start_size: [p.phase_start_size.0.into(), p.phase_start_size.1.into()],
             rate: p.rate.into(),
+            shear: (p.shear_rate != 0.0 || p.phase_start_shear_strain != 0.0)
+                .then(|| [p.shear_rate.into(), p.phase_start_shear_strain.into()]),
         }
     }
 }
@@ -309,6 +327,8 @@ impl ProgramBits {
                 self.phase_start_size[1].into(),
             ),
             rate: self.rate.into(),
+            shear_rate: self.shear.map_or(0.0, |s| s[0].into()),
+            phase_start_shear_strain: self.shear.map_or(0.0, |s| s[1].into()),
         })
     }
 }
@@ -392,6 +412,10 @@ pub struct Stored {
     /// sdem versions before the adaptive level.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub levels: Vec<[u32; 3]>,
+    /// Periodic cell only: the tilt of h2, the shear rate and the shear strain (see
+    /// [`PeriodicBoundary`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<[Bits; 3]>,
 }
 
 /// A checkpoint in memory.
@@ -408,6 +432,8 @@ pub struct Checkpoint {
     pub totals: StepTotals,
     pub program: LoadingProgram,
     pub runner: RunnerState,
+    /// The periodic cell's state beyond its virtual walls (None in a box).
+    pub periodic: Option<PeriodicBoundary>,
 }
 
 fn grains_bits(g: &[Grain]) -> Vec<GrainBits> {
@@ -449,6 +475,9 @@ impl Checkpoint {
                 .iter()
                 .map(|l| [l.level.index() as u32, l.steps, l.pending])
                 .collect(),
+            periodic: self
+                .periodic
+                .map(|p| [p.tilt.into(), p.shear_rate.into(), p.shear_strain.into()]),
         }
     }
 
@@ -517,17 +546,7 @@ impl Checkpoint {
                 },
             )
             .collect::<Result<Vec<_>, String>>()?;
-        let program = LoadingProgram {
-            phases: s.scenario.loading.clone(),
-            current: s.program.current,
-            phase_start_step: s.program.phase_start_step,
-            phase_start_time: s.program.phase_start_time.into(),
-            phase_start_size: (
-                s.program.phase_start_size[0].into(),
-                s.program.phase_start_size[1].into(),
-            ),
-            rate: s.program.rate.into(),
-        };
+        let program = s.program.to_program(&s.scenario.loading)?;
         let runner = RunnerState {
             confirmed_jamming: s.confirmed_jamming.as_ref().map(Jamming::from),
             candidate: s.candidate.as_ref().map(Jamming::from),
@@ -553,6 +572,13 @@ impl Checkpoint {
             totals,
             program,
             runner,
+            periodic: s
+                .periodic
+                .map(|[tilt, shear_rate, shear_strain]| PeriodicBoundary {
+                    tilt: tilt.into(),
+                    shear_rate: shear_rate.into(),
+                    shear_strain: shear_strain.into(),
+                }),
             scenario: s.scenario,
         })
     }

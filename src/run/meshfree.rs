@@ -436,6 +436,7 @@ impl Simulation for Meshfree {
             mean_diameter: self.mean_diameter,
             density: self.density,
             young: self.young,
+            shear_strain: 0.0,
         }
     }
 

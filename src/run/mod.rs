@@ -21,6 +21,7 @@ pub use simulation::{LastGood, RunRecord, Simulation, SolverStatistics};
 pub use steps::LoopState;
 
 use crate::boundary::loading::{LoadState, LoadingProgram};
+use crate::boundary::periodic::PeriodicBoundary;
 use crate::boundary::walls::box_walls;
 use crate::grain::Grain;
 use crate::integration::{Instability, StepTotals, World};
@@ -28,7 +29,7 @@ use crate::output::MacroWriter;
 use crate::output::Measures;
 use crate::output::mcap::{ContinueFrom, Continued, McapSettings, TrajectoryWriter, WriteError};
 use crate::sample::{self, SampleError};
-use crate::scenario::Scenario;
+use crate::scenario::{Boundary, Scenario};
 use checkpoint::{AnyCheckpoint, Checkpoint, CheckpointError};
 use glam::DVec2;
 use meshfree_checkpoint::MeshfreeCheckpoint;
@@ -215,7 +216,19 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
     };
     let b = s.bounds();
     let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
-    Ok(World::new(scenario.parameters(), grains, walls))
+    let world = World::new(scenario.parameters(), grains, walls);
+    Ok(match scenario.boundary {
+        Boundary::Walls => world,
+        Boundary::Periodic => world.with_periodic(PeriodicBoundary::default()),
+    })
+}
+
+/// A new `macro.csv` for an SDEM run: the common columns, and a periodic cell's.
+fn sdem_macro_writer(scenario: &Scenario, path: &Path) -> std::io::Result<MacroWriter> {
+    match scenario.boundary {
+        Boundary::Walls => MacroWriter::create(path),
+        Boundary::Periodic => MacroWriter::create_with_columns(path, sdem::PERIODIC_COLUMNS),
+    }
 }
 
 /// Runs a scenario to the end of its loading program, writing `macro.csv`, `grains.csv` and
@@ -228,7 +241,7 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     let world = build_world(scenario)?;
     std::fs::create_dir_all(out).map_err(io_error(out))?;
     let macro_path = out.join("macro.csv");
-    let writer = MacroWriter::create(&macro_path).map_err(io_error(&macro_path))?;
+    let writer = sdem_macro_writer(scenario, &macro_path).map_err(io_error(&macro_path))?;
     let program = LoadingProgram::new(scenario.loading.clone(), &world.walls);
     let last_good = world.grains.clone();
     let sim = Sdem::new(world, scenario, last_good);
@@ -330,15 +343,33 @@ fn resume_sdem(
         counts[scenario.model.level().index()] = c.grains.len() as u64;
         counts
     });
-    let writer = MacroWriter::resume_upgrading(&macro_path, c.runner.macro_rows, fixed_levels)
-        .map_err(|e| {
-            RunError::Resume(format!(
-                "{}: cannot continue it from the checkpoint's {} rows: {e}",
-                macro_path.display(),
-                c.runner.macro_rows
-            ))
-        })?;
+    let writer = match scenario.boundary {
+        Boundary::Walls => {
+            MacroWriter::resume_upgrading(&macro_path, c.runner.macro_rows, fixed_levels)
+        }
+        Boundary::Periodic => MacroWriter::resume_with_columns(
+            &macro_path,
+            c.runner.macro_rows,
+            sdem::PERIODIC_COLUMNS,
+        ),
+    }
+    .map_err(|e| {
+        RunError::Resume(format!(
+            "{}: cannot continue it from the checkpoint's {} rows: {e}",
+            macro_path.display(),
+            c.runner.macro_rows
+        ))
+    })?;
     let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
+    world.periodic = match scenario.boundary {
+        Boundary::Walls => None,
+        Boundary::Periodic => Some(c.periodic.ok_or_else(|| {
+            RunError::Resume(format!(
+                "{}: the scenario has a periodic cell but the checkpoint has no cell state",
+                checkpoint_path.display()
+            ))
+        })?),
+    };
     world.time = c.time;
     world.step = c.step;
     world.totals = StepTotals {

@@ -1,7 +1,7 @@
 //! The progress bar of a run.
 
 use super::simulation::Simulation;
-use crate::boundary::loading::{LoadingProgram, StopWhen};
+use crate::boundary::loading::{LoadState, LoadingProgram, StopWhen};
 use crate::boundary::walls::box_size;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::time::{Duration, Instant};
@@ -11,10 +11,10 @@ fn stop_fraction(
     until: &StopWhen,
     program: &LoadingProgram,
     sim: &impl Simulation,
-    phi: f64,
-    p_c: f64,
+    load: &LoadState,
     phi_start: f64,
 ) -> Option<f64> {
+    let (phi, p_c) = (load.phi, load.mean_stress());
     let f = match until {
         StopWhen::PackingFraction(target) => {
             let span = target - phi_start;
@@ -36,10 +36,13 @@ fn stop_fraction(
             let (_, h) = box_size(sim.walls());
             (1.0 - h / h0) / e
         }
+        StopWhen::ShearStrain(g) => {
+            (load.shear_strain - program.phase_start_shear_strain).abs() / g
+        }
         StopWhen::Any(list) => {
             return list
                 .iter()
-                .filter_map(|u| stop_fraction(u, program, sim, phi, p_c, phi_start))
+                .filter_map(|u| stop_fraction(u, program, sim, load, phi_start))
                 .fold(None, |acc: Option<f64>, f| {
                     Some(acc.map_or(f, |a| a.max(f)))
                 });
@@ -93,10 +96,10 @@ impl Progress {
         &mut self,
         program: &LoadingProgram,
         sim: &impl Simulation,
-        phi: f64,
-        p_c: f64,
+        load: &LoadState,
         started: Instant,
     ) {
+        let phi = load.phi;
         if !self.enabled {
             return;
         }
@@ -124,7 +127,7 @@ impl Progress {
         let Some(bar) = &self.bar else { return };
         let fraction = program
             .phase()
-            .and_then(|p| stop_fraction(p.until(), program, sim, phi, p_c, self.phi_start));
+            .and_then(|p| stop_fraction(p.until(), program, sim, load, self.phi_start));
         if fraction.is_some() != self.known {
             self.known = fraction.is_some();
             bar.set_style(if self.known {
@@ -149,7 +152,7 @@ impl Progress {
             "step {}  φ {:.4}  p_c {:.3e}  contacts {}  {:.2e} grain-steps/s",
             sim.step_count(),
             phi,
-            p_c,
+            load.mean_stress(),
             sim.contacts(),
             sim.step_count() as f64 * sim.grain_count() as f64 / elapsed
         ));

@@ -14,6 +14,14 @@ use crate::scenario::Scenario;
 use glam::DVec2;
 use std::path::Path;
 
+/// The `macro.csv` columns of a periodic cell after the common ones (whose `sxx_c`, `syy_c`
+/// are then the cell's contact stresses): the shear stress `sxy_c = -sigma_xy` (compression
+/// positive convention: a positive shear rate gives `sxy_c < 0`), the shear strain
+/// `∫ L_xy dt`, the cell's tilt `h2_x / h2_y` (within ±1/2 after remaps), and the kinetic part
+/// of the stress, reported apart: `p_kin = -(sigma_kin_xx + sigma_kin_yy) / 2` and
+/// `sxy_kin = -sigma_kin_xy`.
+pub const PERIODIC_COLUMNS: &[&str] = &["sxy_c", "shear_strain", "cell_tilt", "p_kin", "sxy_kin"];
+
 /// The explicit SDEM engine ([`World`]) with what a run keeps beside it: the last good grains,
 /// the constants of its measures and the adaptive-level statistics.
 pub struct Sdem {
@@ -107,8 +115,34 @@ impl Simulation for Sdem {
         }
     }
 
+    /// In a periodic cell the grains follow the cell at every step already.
     fn remap_affine(&mut self, (lo, hi): (DVec2, DVec2), (to_lo, to_hi): (DVec2, DVec2)) {
-        self.world.remap_affine(lo, hi, to_lo, to_hi);
+        if self.world.periodic.is_none() {
+            self.world.remap_affine(lo, hi, to_lo, to_hi);
+        }
+    }
+
+    fn set_shear_rate(&mut self, rate: f64) {
+        if let Some(p) = self.world.periodic.as_mut() {
+            p.shear_rate = rate;
+        }
+    }
+
+    fn extra_columns(&self, row: &mut String) {
+        use std::fmt::Write;
+        if let Some(p) = &self.world.periodic {
+            let t = &self.world.totals;
+            let height = crate::boundary::walls::box_size(&self.world.walls).1;
+            let _ = write!(
+                row,
+                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.9e}",
+                -t.cell_stress[2],
+                p.shear_strain,
+                p.tilt / height,
+                -0.5 * (t.kinetic_stress[0] + t.kinetic_stress[1]),
+                -t.kinetic_stress[2]
+            );
+        }
     }
 
     fn load_state(&self, jammed: bool) -> LoadState {
@@ -164,6 +198,7 @@ impl Simulation for Sdem {
             totals: world.totals,
             program: run.program.clone(),
             runner: RunnerState::new(run.state, self.last_good.clone(), levels),
+            periodic: world.periodic,
         }
         .write_atomic(path)
     }

@@ -101,6 +101,13 @@ pub trait Simulation {
         let _ = (from, to);
     }
 
+    /// The shear rate `L_xy` of a periodic cell for the next step, as the loading program set
+    /// it. The default ignores it (a solver without a periodic cell: the scenario refuses
+    /// shear phases there).
+    fn set_shear_rate(&mut self, rate: f64) {
+        let _ = rate;
+    }
+
     /// What the loading program reacts to: packing fraction and wall stresses (compression
     /// positive) of the last step, and whether the sample has jammed.
     fn load_state(&self, jammed: bool) -> LoadState;
@@ -289,6 +296,7 @@ mod tests {
                 mean_diameter: 0.1,
                 density: 1.0,
                 young: 1.0,
+                shear_strain: 0.0,
             }
         }
         fn measures(&self, phase: &str, strain_rate: f64) -> Measures {

@@ -189,6 +189,7 @@ impl<'a> Run<'a> {
     ) -> (&'static str, f64) {
         let load = sim.load_state(state.jammed());
         program.drive(sim.walls_mut(), &load);
+        sim.set_shear_rate(program.shear_rate);
         let phase = program.phase().map(|p| p.name()).unwrap_or("end");
         (phase, program.rate)
     }
@@ -416,8 +417,7 @@ impl<'a> Run<'a> {
         rate: f64,
     ) {
         let p_c = load.mean_stress();
-        self.progress
-            .update(program, sim, load.phi, p_c, self.started);
+        self.progress.update(program, sim, load, self.started);
         if let Some(seconds) = self.options.progress_seconds
             && self.last_progress.elapsed().as_secs_f64() >= seconds
         {

@@ -51,10 +51,33 @@ pub struct Scenario {
     /// Body force per unit mass (meshfree model only), e.g. `(0.0, -9.81)`.
     #[serde(default, skip_serializing_if = "is_zero_origin")]
     pub gravity: (f64, f64),
+    /// What bounds the sample: walls (the default) or a periodic cell.
+    #[serde(default, skip_serializing_if = "Boundary::is_walls")]
+    pub boundary: Boundary,
 }
 
 fn default_seed() -> u64 {
     1
+}
+
+/// What bounds the sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum Boundary {
+    /// Four rigid frictionless walls on the sides of the sample's box.
+    #[default]
+    Walls,
+    /// A periodic cell on the sample's box (SPEC §14), SDEM only: no walls; the loading phases
+    /// deform the cell as they would move the walls (the grains follow the cell's affine
+    /// deformation at every step, so `affine` is implied), and `Shear` shears it. Stresses are
+    /// the cell's, from the contact forces. The cell must stay at least twice as wide as the
+    /// largest grain diameter plus the neighbour skin.
+    Periodic,
+}
+
+impl Boundary {
+    pub fn is_walls(&self) -> bool {
+        *self == Boundary::Walls
+    }
 }
 
 /// The initial sample: generated (`count` grains with `radii`) or read from `file`, in the box
@@ -908,6 +931,7 @@ impl Scenario {
             })?;
         }
         self.validate_solver_choice(&mut warnings)?;
+        self.validate_boundary(&mut warnings)?;
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
@@ -985,6 +1009,33 @@ impl Scenario {
                         ));
                     }
                 }
+                Phase::Shear {
+                    rate,
+                    syy,
+                    gain,
+                    max_rate,
+                    until,
+                } => {
+                    if !(rate.is_finite() && *rate != 0.0) {
+                        return Err(invalid(
+                            &format!("{field}.rate"),
+                            num(*rate),
+                            "a finite, non-zero shear rate (1/time; negative shears the other way)",
+                        ));
+                    }
+                    compressive_target(&format!("{field}.syy"), *syy)?;
+                    if !(gain.is_finite() && *gain > 0.0) {
+                        return Err(invalid(
+                            &format!("{field}.gain"),
+                            num(*gain),
+                            "a positive servo gain: the normal stress syy is stress-controlled, \
+                             and without a gain the cell height would never respond (0.5 is stable)",
+                        ));
+                    }
+                    positive(&format!("{field}.max_rate"), *max_rate)?;
+                    validate_until(&format!("{field}.until"), until)?;
+                    self.shear_rate_warning(&field, *rate, *syy, &mut warnings);
+                }
                 Phase::Relax { until } => {
                     validate_until(&format!("{field}.until"), until)?;
                     if only_stress_conditions(until) {
@@ -1023,6 +1074,90 @@ impl Scenario {
             _ => {}
         }
         Ok(warnings)
+    }
+
+    /// The periodic cell's checks: SDEM only; a cell at least twice the interaction range wide;
+    /// shear phases and shear-strain stops only in a periodic cell.
+    fn validate_boundary(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
+        let _ = warnings;
+        if self.boundary.is_walls() {
+            for (k, phase) in self.loading.iter().enumerate() {
+                if matches!(phase, Phase::Shear { .. }) {
+                    return Err(invalid(
+                        &format!("loading[{k}]"),
+                        "Shear(..)",
+                        "a phase of a periodic cell (boundary: Periodic): walls cannot shear",
+                    ));
+                }
+                if has_shear_strain(phase.until()) {
+                    return Err(invalid(
+                        &format!("loading[{k}].until"),
+                        "ShearStrain(..)",
+                        "a stop condition of a periodic cell (boundary: Periodic)",
+                    ));
+                }
+            }
+            return Ok(());
+        }
+        if matches!(self.model, Model::Meshfree(_)) {
+            return Err(invalid(
+                "boundary",
+                "Periodic",
+                "Walls for model: Meshfree (its periodic cell is not written yet)",
+            ));
+        }
+        let largest = match (&self.sample.loaded, &self.sample.radii) {
+            (Some(l), _) => l.grains.iter().map(|g| g.radius).fold(0.0, f64::max),
+            (None, Some(r)) => r.max_radius(),
+            (None, None) => return Ok(()),
+        };
+        let range = 2.0 * largest + self.contact.skin * self.mean_radius();
+        let narrowest = self.sample.box_width.min(self.sample.box_height);
+        if narrowest < 2.0 * range {
+            return Err(invalid(
+                "sample.box_width / box_height",
+                format!(
+                    "{} x {}",
+                    num(self.sample.box_width),
+                    num(self.sample.box_height)
+                ),
+                &format!(
+                    "at least {} on each side in a periodic cell: twice the largest grain \
+                     diameter plus the neighbour skin ({}), so that a grain meets one image of \
+                     another at most; the cell must stay that wide as it is compressed",
+                    num(2.0 * range),
+                    num(range)
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The mean grain radius: the distribution's, or the file's grains' (NaN while unknown).
+    pub fn mean_radius(&self) -> f64 {
+        match (&self.sample.loaded, &self.sample.radii) {
+            (Some(l), _) => {
+                l.grains.iter().map(|g| g.radius).sum::<f64>() / l.grains.len().max(1) as f64
+            }
+            (None, Some(r)) => r.mean_radius(),
+            (None, None) => f64::NAN,
+        }
+    }
+
+    /// Warns when a shear phase is not quasi-static: the inertial number
+    /// `|rate| d_mean sqrt(rho / syy)` at its normal stress above 1e-3 (SPEC §7).
+    fn shear_rate_warning(&self, field: &str, rate: f64, syy: f64, warnings: &mut Vec<String>) {
+        let d = 2.0 * self.mean_radius();
+        let inertial = rate.abs() * d * (self.material.density / syy).sqrt();
+        if inertial > 1e-3 {
+            warnings.push(format!(
+                "{field}.rate = {rate}: the inertial number |rate| d_mean sqrt(rho / syy) is \
+                 {inertial:.2e}, above the quasi-static limit 1e-3: the shear stress will \
+                 include inertial (rate-dependent) stress; use |rate| <= {:.2e} for a \
+                 quasi-static test",
+                1e-3 / (d * (self.material.density / syy).sqrt())
+            ));
+        }
     }
 
     /// The largest mean stress the contact law can carry before it leaves its domain (None when
@@ -1305,6 +1440,15 @@ fn stress_conditions(field: &str, until: &StopWhen, out: &mut Vec<(String, f64)>
     }
 }
 
+/// Whether a stop condition names a shear strain (only a periodic cell shears).
+fn has_shear_strain(until: &StopWhen) -> bool {
+    match until {
+        StopWhen::ShearStrain(_) => true,
+        StopWhen::Any(list) => list.iter().any(has_shear_strain),
+        _ => false,
+    }
+}
+
 /// Whether a stop condition can only be met by a mean stress.
 fn only_stress_conditions(until: &StopWhen) -> bool {
     match until {
@@ -1328,6 +1472,7 @@ fn validate_until(field: &str, until: &StopWhen) -> Result<(), ScenarioError> {
                 return Err(invalid(field, num(*e), "a strain in (0, 1)"));
             }
         }
+        StopWhen::ShearStrain(g) => positive(field, *g)?,
         StopWhen::Steps(_) | StopWhen::Jammed => {}
         StopWhen::Any(list) => {
             if list.is_empty() {
