@@ -180,6 +180,40 @@ impl PeriodicBoundary {
         }
     }
 
+    /// Turns the left and right virtual walls along h2, so that the four walls are the cell's
+    /// sides (as the MCAP log records them; the loop reads only their positions).
+    pub fn orient_walls(&self, walls: &mut [Wall]) {
+        let height = walls[TOP].point.y - walls[BOTTOM].point.y;
+        let inward = DVec2::new(height, -self.tilt).normalize();
+        walls[LEFT].normal = inward;
+        walls[RIGHT].normal = -inward;
+    }
+
+    /// The cell whose four sides are `walls` (as [`orient_walls`](Self::orient_walls) leaves
+    /// them): an error for walls that are not the sides of a cell.
+    pub fn cell_of_sides(walls: &[Wall]) -> Result<PeriodicCell, String> {
+        if walls.len() != 4 {
+            return Err(format!(
+                "{} sides for a periodic cell (4 expected)",
+                walls.len()
+            ));
+        }
+        let (width, height) = box_size(walls);
+        let n = walls[LEFT].normal;
+        if !(n.x > 0.0 && width > 0.0 && height > 0.0) {
+            return Err(format!(
+                "the sides (width {width}, height {height}, left normal {n:?}) make no cell"
+            ));
+        }
+        // The left side runs along h2 = (tilt, height), perpendicular to its normal.
+        let tilt = -n.y / n.x * height;
+        Ok(PeriodicBoundary {
+            tilt,
+            ..Default::default()
+        }
+        .cell(walls))
+    }
+
     /// The velocity gradient L of the affine field: the walls' strain rates on the diagonal,
     /// the shear rate above it.
     pub fn velocity_gradient(&self, walls: &[Wall]) -> DMat2 {
@@ -208,6 +242,7 @@ impl PeriodicBoundary {
         if turns != 0.0 {
             self.tilt -= turns * after.h1().x;
         }
+        self.orient_walls(walls);
         CellMotion {
             before,
             current: self.cell(walls),

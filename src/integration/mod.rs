@@ -225,6 +225,7 @@ impl World {
 
     /// Makes the world periodic: the walls become the virtual walls of the cell they bound.
     pub fn with_periodic(mut self, periodic: PeriodicBoundary) -> Self {
+        periodic.orient_walls(&mut self.walls);
         self.periodic = Some(periodic);
         self
     }

@@ -508,6 +508,8 @@ pub struct Frame {
     pub contacts: Vec<FrameContact>,
     /// The `macro.csv` row of this frame (absent if the log has no `/macro` message for it).
     pub measures: Option<Measures>,
+    /// The periodic cell of a run without walls, from its four sides in `walls`; None in a box.
+    pub cell: Option<crate::boundary::periodic::PeriodicCell>,
 }
 
 impl Frame {
@@ -1129,6 +1131,10 @@ impl TrajectoryWriter {
             ("stress_sign", info.stress_sign.to_string()),
         ]
         .into_iter()
+        .chain(
+            // A periodic cell's `/walls` are the cell's four sides (SPEC §14), met by no grain.
+            (!scenario.boundary.is_walls()).then(|| ("boundary", "periodic".to_string())),
+        )
         .chain(info.extra)
         .map(|(k, v)| (k.to_string(), v))
         .collect();
@@ -2023,6 +2029,14 @@ impl Trajectory {
             Some(d) => Some(decode_macro(&d).map_err(|e| bad(TOPIC_MACRO, e))?),
             None => None,
         };
+        let cell = if self.run_info("boundary") == Some("periodic") {
+            Some(
+                crate::boundary::periodic::PeriodicBoundary::cell_of_sides(&walls)
+                    .map_err(|e| bad(TOPIC_WALLS, e))?,
+            )
+        } else {
+            None
+        };
         let frame = Frame {
             step,
             time,
@@ -2032,6 +2046,7 @@ impl Trajectory {
             walls,
             contacts,
             measures,
+            cell,
         };
         frame.check().map_err(|e| bad(TOPIC_CONTACTS, e))?;
         Ok(frame)

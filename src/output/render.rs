@@ -103,15 +103,25 @@ pub fn grain_outline(grain: &FrameGrain, nodes: usize, cuts: &[(DVec2, DVec2)]) 
     polygon
 }
 
-/// The cuts of every grain of a frame: its contacts' chords and the walls it crosses.
+/// The cuts of every grain of a frame: its contacts' chords and the walls it crosses. In a
+/// periodic cell a contact with an image of a grain is logged where the images meet: its chord
+/// is moved by the lattice vector that brings it to the grain itself, and the cell's sides cut
+/// nothing.
 pub fn frame_cuts(frame: &Frame) -> Vec<Vec<(DVec2, DVec2)>> {
     let mut cuts: Vec<Vec<(DVec2, DVec2)>> = vec![Vec::new(); frame.grains.len()];
+    let near = |point: DVec2, g: usize| match &frame.cell {
+        Some(cell) => frame.grains[g].center + cell.minimum_image(point - frame.grains[g].center).0,
+        None => point,
+    };
     for c in &frame.contacts {
         let (i, j) = (c.first as usize, c.second as usize);
         if i < cuts.len() && j < cuts.len() && c.normal.is_finite() && c.point.is_finite() {
-            cuts[i].push((c.point, c.normal));
-            cuts[j].push((c.point, -c.normal));
+            cuts[i].push((near(c.point, i), c.normal));
+            cuts[j].push((near(c.point, j), -c.normal));
         }
+    }
+    if frame.cell.is_some() {
+        return cuts;
     }
     for (g, list) in frame.grains.iter().zip(cuts.iter_mut()) {
         let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
@@ -164,6 +174,17 @@ fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) 
         if lo.is_finite() && hi.is_finite() && (hi - lo).min_element() > 0.0 {
             return (lo, hi);
         }
+    }
+    if let Some(cell) = &frame.cell {
+        let corners = [
+            cell.origin,
+            cell.origin + cell.h1(),
+            cell.origin + cell.h2(),
+            cell.origin + cell.h1() + cell.h2(),
+        ];
+        let lo = corners.iter().fold(corners[0], |a, b| a.min(*b));
+        let hi = corners.iter().fold(corners[0], |a, b| a.max(*b));
+        return (lo, hi);
     }
     if frame.walls.len() == 4 {
         let lo = DVec2::new(frame.walls[LEFT].point.x, frame.walls[BOTTOM].point.y);
@@ -394,16 +415,32 @@ fn draw_ellipses<DB: DrawingBackend>(
     let cuts = frame_cuts(frame);
     // The view's edges cut every grain too (no drawing outside the picture's box).
     let view = view_cuts(layout);
+    // In a periodic cell, each grain and its images next to the cell (the view is the cell's
+    // bounding box, so a grain across a side shows on both).
+    let images: Vec<DVec2> = match &frame.cell {
+        Some(cell) => (-1..=1)
+            .flat_map(|a| (-1..=1).map(move |b| cell.image_shift([a, b])))
+            .collect(),
+        None => vec![DVec2::ZERO],
+    };
     for (k, g) in frame.grains.iter().enumerate() {
         let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
         let r_px = reach * layout.scale;
-        if !r_px.is_finite() || (g.center - g.center.clamp(layout.lo, layout.hi)).length() > reach {
+        if !r_px.is_finite() {
             continue;
         }
         // Contour nodes: about one per 2 pixels of perimeter, at most 360.
         let nodes = (std::f64::consts::PI * r_px).clamp(12.0, 360.0) as usize;
-        let polygon = grain_outline(g, nodes, &cuts[k]);
-        draw_clipped(root, polygon, &view, means[k], r_px >= 4.0, layout)?;
+        let mut polygon = None;
+        for shift in &images {
+            let center = g.center + *shift;
+            if (center - center.clamp(layout.lo, layout.hi)).length() > reach {
+                continue;
+            }
+            let outline = polygon.get_or_insert_with(|| grain_outline(g, nodes, &cuts[k]));
+            let moved: Vec<DVec2> = outline.iter().map(|x| *x + *shift).collect();
+            draw_clipped(root, moved, &view, means[k], r_px >= 4.0, layout)?;
+        }
     }
     Ok(())
 }
@@ -415,16 +452,33 @@ fn draw_frame_decor<DB: DrawingBackend>(
     layout: &Layout,
     options: &RenderOptions,
 ) -> Result<(), String> {
-    // The box.
+    // The box; for a periodic cell, its bounding box in grey and the cell's sides in black.
     let (x0, y0) = layout.origin;
+    let box_colour = if frame.cell.is_some() {
+        RGBColor(170, 170, 170)
+    } else {
+        BLACK
+    };
     root.draw(&Rectangle::new(
         [
             (x0, y0),
             (x0 + layout.box_w as i32, y0 + layout.box_h as i32),
         ],
-        BLACK.stroke_width(2),
+        box_colour.stroke_width(2),
     ))
     .map_err(err)?;
+    if let Some(cell) = &frame.cell {
+        let corners = [
+            cell.origin,
+            cell.origin + cell.h1(),
+            cell.origin + cell.h1() + cell.h2(),
+            cell.origin + cell.h2(),
+            cell.origin,
+        ];
+        let pixels: Vec<(i32, i32)> = corners.iter().map(|&x| layout.pixel(x)).collect();
+        root.draw(&PathElement::new(pixels, BLACK.stroke_width(2)))
+            .map_err(err)?;
+    }
 
     // Caption.
     let font = |size: u32| (FONT_FAMILY, size).into_font().color(&BLACK);
