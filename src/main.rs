@@ -539,6 +539,17 @@ fn run(cli: Cli) -> Result<()> {
                 );
             }
             println!("time step: {:.4e}", parsed.time_step_value());
+            if !parsed.boundary.is_walls()
+                && let Some(range) = parsed.interaction_range()
+            {
+                println!(
+                    "boundary: periodic cell {} x {}; it must stay at least {:.4e} wide \
+                     (twice the largest grain diameter + neighbour skin)",
+                    parsed.sample.box_width,
+                    parsed.sample.box_height,
+                    2.0 * range
+                );
+            }
             if let Some(a) = parsed.parameters().adaptive {
                 println!(
                     "adaptive model level: time step {:.4e} while every grain is rigid (critical {:.4e})",

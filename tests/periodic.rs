@@ -452,10 +452,31 @@ fn a_sheared_cell_resumes_bitwise_and_is_the_same_on_any_thread_count() {
     use sdem::run::{resume_run, run_scenario};
     let scenario = small_shear();
     let reference = common::temp_dir("periodic", "ref");
+    let log = reference.join("shear.mcap");
     let summary = common::with_threads(1, || {
-        run_scenario(&scenario, &common::checkpointed(&reference, 1_000_000_000))
+        run_scenario(
+            &scenario,
+            &sdem::run::RunOptions {
+                mcap: Some(sdem::output::mcap::McapSettings::new(&log)),
+                ..common::checkpointed(&reference, 1_000_000_000)
+            },
+        )
     })
     .unwrap();
+    // The log's frames carry the cell, sheared as the run left it; a picture of it draws.
+    let trajectory = sdem::output::mcap::Trajectory::open(&log).unwrap();
+    let last = trajectory.frame(-1).unwrap();
+    let end = Checkpoint::read(&reference.join("checkpoint.bin")).unwrap();
+    let cell = last.cell.expect("a periodic log's frames have the cell");
+    let tilt = end.periodic.unwrap().tilt;
+    assert!(
+        (cell.h2().x - tilt).abs() < 1e-12 * cell.h1().x,
+        "{cell:?} vs tilt {tilt}"
+    );
+    assert_eq!(cell.h1().x, box_size(&end.walls).0);
+    let png = reference.join("last.png");
+    sdem::output::render::render_frame(&last, &png, &Default::default()).unwrap();
+    assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
     let total = summary.steps;
     let shear = column(&reference, "shear_strain");
     let tilt = column(&reference, "cell_tilt");

@@ -1106,12 +1106,9 @@ impl Scenario {
                 "Walls for model: Meshfree (its periodic cell is not written yet)",
             ));
         }
-        let largest = match (&self.sample.loaded, &self.sample.radii) {
-            (Some(l), _) => l.grains.iter().map(|g| g.radius).fold(0.0, f64::max),
-            (None, Some(r)) => r.max_radius(),
-            (None, None) => return Ok(()),
+        let Some(range) = self.interaction_range() else {
+            return Ok(());
         };
-        let range = 2.0 * largest + self.contact.skin * self.mean_radius();
         let narrowest = self.sample.box_width.min(self.sample.box_height);
         if narrowest < 2.0 * range {
             return Err(invalid(
@@ -1131,6 +1128,17 @@ impl Scenario {
             ));
         }
         Ok(())
+    }
+
+    /// The interaction range of the neighbour search, largest grain diameter + skin (None while
+    /// the sample file is not read): a periodic cell must stay twice as wide.
+    pub fn interaction_range(&self) -> Option<f64> {
+        let largest = match (&self.sample.loaded, &self.sample.radii) {
+            (Some(l), _) => l.grains.iter().map(|g| g.radius).fold(0.0, f64::max),
+            (None, Some(r)) => r.max_radius(),
+            (None, None) => return None,
+        };
+        Some(2.0 * largest + self.contact.skin * self.mean_radius())
     }
 
     /// The mean grain radius: the distribution's, or the file's grains' (NaN while unknown).
