@@ -138,6 +138,7 @@ fn f64_round_trips_bit_exactly() {
             last_good: grains.clone(),
             ..Default::default()
         },
+        periodic: None,
     };
     let back = Checkpoint::from_bytes(&c.to_bytes(), "mem").unwrap();
     assert_eq!(grain_bits(&back.grains), grain_bits(&grains));
@@ -497,6 +498,7 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
             last_good: world.grains[..3].to_vec(),
             ..Default::default()
         },
+        periodic: None,
     };
     let good = c.to_bytes();
     assert_eq!(Checkpoint::from_bytes(&good, "mem").unwrap(), c);

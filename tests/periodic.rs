@@ -308,8 +308,8 @@ fn grain_stress_sums(world: &World) -> ([f64; 3], [f64; 3]) {
     let (mut external, mut constitutive) = ([0.0; 3], [0.0; 3]);
     for (g, s) in world.grains.iter().zip(&world.grain_stress) {
         let area = g.ellipse_area() - s.lost_area;
-        for k in 0..3 {
-            external[k] += area * s.external[k];
+        for (sum, x) in external.iter_mut().zip(s.external) {
+            *sum += area * x;
         }
         let e1 = g.principal_direction();
         let e2 = e1.perp();
@@ -340,18 +340,17 @@ fn the_cell_stress_is_the_mean_of_the_grain_stresses() {
         (cell[0] - cell[1]).abs() < 0.2 * p && cell[2].abs() < 0.2 * p,
         "{cell:?}"
     );
-    for k in 0..3 {
+    for (k, ((lw, constitutive), cell)) in external.iter().zip(&constitutive).zip(&cell).enumerate()
+    {
         assert!(
-            (external[k] / area - cell[k]).abs() < 1e-6 * p,
-            "Love–Weber {k}: {} vs {}",
-            external[k] / area,
-            cell[k]
+            (lw / area - cell).abs() < 1e-6 * p,
+            "Love–Weber {k}: {} vs {cell}",
+            lw / area
         );
         assert!(
-            (constitutive[k] / area - cell[k]).abs() < 0.03 * p,
-            "constitutive {k}: {} vs {}",
-            constitutive[k] / area,
-            cell[k]
+            (constitutive / area - cell).abs() < 0.03 * p,
+            "constitutive {k}: {} vs {cell}",
+            constitutive / area
         );
     }
 }
@@ -379,7 +378,7 @@ fn a_turned_sample_gives_the_turned_stresses() {
         })
         .collect();
     let mut turned = World::new(
-        world.params.clone(),
+        world.params,
         turned_grains,
         box_walls(origin.x, origin.x + h, origin.y, origin.y + w),
     )

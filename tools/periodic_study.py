@@ -15,7 +15,12 @@ usage: tools/periodic_study.py [--out out/periodic] [--sdem target/release/sdem]
    Reported: p_c at phi = 0.84, 0.86, 0.88, 0.90 (interpolated in the macro.csv rows), the
    jamming point by both rattler rules (SPEC §7) and eq. 69's RMS error with the paper's
    (phi0, Z0) = (0.833, 4.20) and with the run's own 3-rule point.
-2. Simple shear (`scenarios/shear_A_periodic.ron`): sample A sheared at constant normal stress
+2. The jamming point of samples A and B with the shipped protocols (`isotropic_A.ron`,
+   `isotropic_B.ron`: compaction to phi = 0.95 at inertial number 1e-3), walls against a
+   periodic cell (`isotropic_A_periodic.ron`, and isotropic_B.ron with `boundary: Periodic`):
+   phi0 and Z0 by the 3-contact rattler rule, eq. 69's RMS error with the paper's and the run's
+   own jamming point, in `jamming_protocol.csv`.
+3. Simple shear (`scenarios/shear_A_periodic.ron`): sample A sheared at constant normal stress
    syy = 1e-3, 1e-2 and 5e-2 E, each at the rate that puts the inertial number at 9.6e-4, and at
    syy = 1e-2 also at half that rate (the quasi-static limit). Reported: the steady-state stress
    ratio mu = |sxy_c| / p_c (mean and standard deviation over gamma in [1, 2]), the packing
@@ -45,6 +50,7 @@ from sdem_vs_meshfree import eq69_error, jamming_row  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 PHI_POINTS = (0.84, 0.86, 0.88, 0.90)
 PAPER_A = (0.833, 4.20)
+PAPER_B = (0.858, 4.22)
 
 
 def size_text(n, seed, periodic):
@@ -84,6 +90,43 @@ def shear_text(syy, rate_factor):
     every = max(200, int(0.005 / rate / 1.366e-3))
     t = re.sub(r"every: \d+", f"every: {every}", t)
     return name, t
+
+
+def jamming_text(sample, periodic):
+    """The shipped isotropic compaction of sample A or B, walls or periodic."""
+    if sample == "A" and periodic:
+        return (ROOT / "scenarios" / "isotropic_A_periodic.ron").read_text()
+    t = (ROOT / "scenarios" / f"isotropic_{sample}.ron").read_text()
+    if periodic:
+        t = t.replace(f'name: "isotropic_{sample}"', f'name: "isotropic_{sample}_periodic"')
+        t = t.replace("    output:", "    boundary: Periodic,\n    output:")
+    return t
+
+
+def jamming_report(a, runs):
+    table = []
+    for sample, kind, run_dir in runs:
+        if not (run_dir / "summary.txt").exists():
+            continue
+        rows = rows_of(run_dir)
+        j = jamming_row(run_dir.name, rows)
+        paper = PAPER_A if sample == "A" else PAPER_B
+        row = dict(sample=sample, boundary=kind, paper_phi0=paper[0], paper_z0=paper[1],
+                   eq69_rms_paper=f"{eq69_error(rows, *paper):.4f}",
+                   p_c_0_90=f"{p_at(rows, 0.90):.4e}", p_c_0_95=f"{float(rows[-1]['p_c']):.4e}",
+                   cpu_s=round(float((run_dir / 'cost.txt').read_text()), 1))
+        if j:
+            row.update(phi0_2rule=f"{j['phi0']:.4f}", z0_2rule=f"{j['z_nr0']:.3f}",
+                       phi0_3rule=f"{j['phi0_3rule']:.4f}", z0_3rule=f"{j['z_nr3_0']:.3f}",
+                       p_c_at_3rule=f"{j['p_c_3rule']:.3e}",
+                       eq69_rms_own_3rule=f"{j['eq69_rms_err_3rule']:.4f}")
+        table.append(row)
+    write_csv(a.out / "jamming_protocol.csv", table)
+    print("\njamming point, shipped protocols (3-contact rule), eq. 69 RMS with the paper's and the own point")
+    for r in table:
+        print(f"  {r['sample']} {r['boundary']:9} phi0 {r.get('phi0_3rule', '')} Z0 {r.get('z0_3rule', '')}"
+              f" (paper {r['paper_phi0']}, {r['paper_z0']})  eq69 paper {r['eq69_rms_paper']}"
+              f"  own {r.get('eq69_rms_own_3rule', '')}  p(0.90) {r['p_c_0_90']}  {r['cpu_s']} CPU s")
 
 
 def run(sdem, run_dir, text, threads):
@@ -264,6 +307,8 @@ def main():
         for seed in range(1, seeds + 1):
             for kind in ("walls", "periodic"):
                 size_runs.append((kind, n, seed, a.out / "runs" / f"size_{kind}_{n}_s{seed}"))
+    jam_runs = [(sample, kind, a.out / "runs" / f"jam_{sample}_{kind}")
+                for sample in ("A", "B") for kind in ("walls", "periodic")]
     shear_runs = []
     if not a.no_shear:
         for syy, factor in [(1e-2, 1), (5e-2, 1), (1e-3, 1), (1e-2, 0.5)]:
@@ -273,6 +318,8 @@ def main():
         jobs = []
         for kind, n, seed, run_dir in size_runs:
             jobs.append((run_dir, size_text(n, seed, kind == "periodic")))
+        for sample, kind, run_dir in jam_runs:
+            jobs.append((run_dir, jamming_text(sample, kind == "periodic")))
         for syy, factor, name, run_dir in shear_runs:
             jobs.append((run_dir, shear_text(syy, factor)[1]))
         jobs = [j for j in jobs if a.only in j[0].name]
@@ -285,6 +332,7 @@ def main():
                     print(f"failed: {e}", flush=True)
     a.out.mkdir(parents=True, exist_ok=True)
     size_effect(a, size_runs)
+    jamming_report(a, jam_runs)
     shear_report(a, shear_runs)
 
 

@@ -521,6 +521,17 @@ impl Checkpoint {
         s.scenario
             .validate()
             .map_err(|e| format!("invalid scenario: {e}"))?;
+        if s.periodic.is_some() == s.scenario.boundary.is_walls() {
+            return Err(format!(
+                "the scenario's boundary is {:?} but the state {} a periodic cell",
+                s.scenario.boundary,
+                if s.periodic.is_some() {
+                    "has"
+                } else {
+                    "has no"
+                }
+            ));
+        }
         let adaptive = s.scenario.model.adaptive().is_some();
         if adaptive && s.levels.len() != s.grains.len() {
             return Err(format!(

@@ -361,15 +361,8 @@ fn resume_sdem(
         ))
     })?;
     let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
-    world.periodic = match scenario.boundary {
-        Boundary::Walls => None,
-        Boundary::Periodic => Some(c.periodic.ok_or_else(|| {
-            RunError::Resume(format!(
-                "{}: the scenario has a periodic cell but the checkpoint has no cell state",
-                checkpoint_path.display()
-            ))
-        })?),
-    };
+    // A checkpoint has the cell state exactly when its scenario has a periodic cell.
+    world.periodic = c.periodic;
     world.time = c.time;
     world.step = c.step;
     world.totals = StepTotals {
