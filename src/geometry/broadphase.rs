@@ -125,23 +125,10 @@ impl NeighborList {
             let cy = (((c.y - lo.y) / cell) as usize).min(rows - 1);
             (cx, cy)
         };
-        // Stable counting sort of the grains into cells.
-        let mut cell_start = vec![0u32; cols * rows + 1];
-        for c in centers {
-            let (cx, cy) = cell_of(*c);
-            cell_start[cy * cols + cx + 1] += 1;
-        }
-        for k in 0..cols * rows {
-            cell_start[k + 1] += cell_start[k];
-        }
-        let mut fill = cell_start.clone();
-        let mut cell_grains = vec![0u32; n];
-        for (g, c) in centers.iter().enumerate() {
-            let (cx, cy) = cell_of(*c);
-            let slot = &mut fill[cy * cols + cx];
-            cell_grains[*slot as usize] = g as u32;
-            *slot += 1;
-        }
+        let (cell_start, cell_grains) = sort_into_bins(n, cols * rows, |g| {
+            let (cx, cy) = cell_of(centers[g]);
+            cy * cols + cx
+        });
         let skin = self.skin;
         let neighbours: Vec<Vec<u32>> = (0..n)
             .into_par_iter()
@@ -223,22 +210,10 @@ impl NeighborList {
                 ((f.y * rows as f64) as usize).min(rows - 1),
             )
         };
-        let mut cell_start = vec![0u32; cols * rows + 1];
-        for s in reduced {
-            let (cx, cy) = cell_of(*s);
-            cell_start[cy * cols + cx + 1] += 1;
-        }
-        for k in 0..cols * rows {
-            cell_start[k + 1] += cell_start[k];
-        }
-        let mut fill = cell_start.clone();
-        let mut cell_grains = vec![0u32; n];
-        for (g, s) in reduced.iter().enumerate() {
-            let (cx, cy) = cell_of(*s);
-            let slot = &mut fill[cy * cols + cx];
-            cell_grains[*slot as usize] = g as u32;
-            *slot += 1;
-        }
+        let (cell_start, cell_grains) = sort_into_bins(n, cols * rows, |g| {
+            let (cx, cy) = cell_of(reduced[g]);
+            cy * cols + cx
+        });
         let skin = self.skin;
         // With fewer than 3 bins across, the neighbouring bins repeat: each grain is met once.
         let wrap = |k: usize, delta: isize, count: usize| -> usize {
@@ -320,6 +295,26 @@ impl NeighborList {
     pub fn pairs_of(&self, g: usize) -> &[u32] {
         &self.grain_pairs[self.grain_offsets[g] as usize..self.grain_offsets[g + 1] as usize]
     }
+}
+
+/// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
+/// being `grains[start[k]..start[k + 1]]`, in increasing order.
+fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; bins + 1];
+    for g in 0..n {
+        start[bin_of(g) + 1] += 1;
+    }
+    for k in 0..bins {
+        start[k + 1] += start[k];
+    }
+    let mut fill = start.clone();
+    let mut grains = vec![0u32; n];
+    for g in 0..n {
+        let slot = &mut fill[bin_of(g)];
+        grains[*slot as usize] = g as u32;
+        *slot += 1;
+    }
+    (start, grains)
 }
 
 #[cfg(test)]
