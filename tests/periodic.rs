@@ -597,3 +597,40 @@ Scenario(
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Expectation: on the command line a periodic scenario that cannot run exits non-zero with the
+/// message naming the field; `sdem check` of a valid one prints the cell's least width.
+#[test]
+fn the_command_line_refuses_a_narrow_cell_and_reports_a_valid_one() {
+    let dir = common::temp_dir("periodic", "cli");
+    let narrow = dir.join("narrow.ron");
+    std::fs::write(
+        &narrow,
+        SMALL_SHEAR.replace("count: 200, box_width: 0.45", "count: 10, box_width: 0.06"),
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .args(["run", narrow.to_str().unwrap(), "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("sample.box_width") && stderr.contains("periodic cell"),
+        "{stderr}"
+    );
+    let valid = dir.join("valid.ron");
+    std::fs::write(&valid, SMALL_SHEAR).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .args(["check", valid.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("boundary: periodic cell 0.45 x 0.45"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

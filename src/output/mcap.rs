@@ -848,9 +848,13 @@ fn encode_box(out: &mut String, walls: &[Wall], log_time: u64, mean_radius: f64,
         out.push_str(",\"frame_id\":\"sdem\",\"id\":\"box\",\"lifetime\":{\"sec\":0,\"nsec\":0},\"frame_locked\":false,\"metadata\":[],\"arrows\":[],\"cubes\":[],\"spheres\":[],\"cylinders\":[],\"lines\":[");
         // Sides along h2 = (tilt, height) in a sheared periodic cell.
         let n = walls[LEFT].normal;
-        let shift = if n.y != 0.0 { -n.y / n.x * (y1 - y0) } else { 0.0 };
-        let corners = [(x0, y0), (x1, y0), (x1 + shift, y1), (x0 + shift, y1)]
-            .map(|(x, y)| DVec2::new(x, y));
+        let shift = if n.y != 0.0 {
+            -n.y / n.x * (y1 - y0)
+        } else {
+            0.0
+        };
+        let corners =
+            [(x0, y0), (x1, y0), (x1 + shift, y1), (x0 + shift, y1)].map(|(x, y)| DVec2::new(x, y));
         json_line_loop(out, &corners, 0.25 * mean_radius, decimals);
         out.push_str("],\"triangles\":[],\"texts\":[],\"models\":[]}");
     }
