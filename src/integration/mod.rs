@@ -4,7 +4,14 @@
 //! One step is three parallel passes, each deterministic whatever the thread count:
 //! 1. per grain: its shape and velocity field (`frames`);
 //! 2. per candidate pair: contact geometry and force, written to the pair's own slot;
-//! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update.
+//! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update;
+//! 4. in a periodic cell (SPEC §14), per grain: carried by the cell's affine deformation over the
+//!    step and wrapped back into the cell (`World::follow_cell`).
+//!
+//! In a periodic cell a pair `[i, j]` meets the image of j at `x_j + H n` (its image vector n in
+//! the neighbour list); its relative velocity adds the affine field's `L d` (d the branch vector),
+//! since grain velocities are relative to that field; its force enters the cell stress
+//! `(1/A) sum sym(f_i ⊗ d)`.
 //!
 //! Sums over grains (wall forces, areas, energies) are taken per fixed-size chunk and the chunk
 //! sums added in order.

@@ -10,7 +10,10 @@ use glam::DVec2;
 use std::path::Path;
 
 /// A solver as the run loop ([`super::run_loop`]) drives it: a box of grains between four
-/// walls that the loading program moves, stepped in time, measured, and written out.
+/// walls that the loading program moves, stepped in time, measured, and written out. (A
+/// periodic cell is driven the same way: its four virtual walls carry the cell's size and
+/// strain rates, see [`crate::boundary::periodic::PeriodicBoundary`]; a shear phase also sets
+/// [`set_shear_rate`](Self::set_shear_rate).)
 ///
 /// The loop owns everything that does not depend on how the grains are computed: the loading
 /// program, jamming detection, stop conditions, the output cadence, checkpoint cadence,
