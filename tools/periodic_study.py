@@ -23,8 +23,9 @@ usage: tools/periodic_study.py [--out out/periodic] [--sdem target/release/sdem]
 3. Simple shear (`scenarios/shear_A_periodic.ron`): sample A sheared at constant normal stress
    syy = 1e-3, 1e-2 and 5e-2 E, each at the rate that puts the inertial number at 9.6e-4, and at
    syy = 1e-2 also at half that rate (the quasi-static limit). Reported: the steady-state stress
-   ratio mu = |sxy_c| / p_c (mean and standard deviation over gamma in [1, 2]), the packing
-   fraction and coordination there.
+   ratio mu = -sxy_c / p_c (mean and standard deviation of the rows over gamma in [1, 2], and
+   the standard error of the mean from 10 blocks of 0.1 in gamma), the packing fraction and
+   coordination there.
 
 Outputs in --out: `runs/<name>/` (the scenario beside it as `<name>.ron`, macro.csv,
 summary.txt, cost.txt with the run's CPU seconds), `size_effect.csv`, `jamming.csv`,
@@ -241,24 +242,29 @@ def shear_report(a, runs):
             continue
         rows = [r for r in rows_of(run_dir) if r["phase"] == "shear"]
         steady = [r for r in rows if 1.0 <= float(r["shear_strain"]) <= 2.0]
-        mu = [abs(float(r["sxy_c"])) / float(r["p_c"]) for r in steady]
         mu_full = [-float(r["sxy_c"]) / float(r["p_c"]) for r in steady]
         q_full = [math.hypot(float(r["q_c"]), float(r["sxy_c"])) / float(r["p_c"]) for r in steady]
         mean = lambda key: statistics.fmean(float(r[key]) for r in steady)
+        # Standard error of the mean from 10 blocks of 0.1 in gamma (the rows are correlated).
+        blocks = [[m for m, r in zip(mu_full, steady) if k <= 10 * (float(r["shear_strain"]) - 1.0) < k + 1]
+                  for k in range(10)]
+        block_means = [statistics.fmean(b) for b in blocks if b]
+        mu_se = statistics.stdev(block_means) / math.sqrt(len(block_means))
         table.append(dict(
             syy=syy, rate_factor=factor, name=name, rows=len(steady),
             mu_mean=f"{statistics.fmean(mu_full):.4f}", mu_sd=f"{statistics.pstdev(mu_full):.4f}",
+            mu_se=f"{mu_se:.4f}",
             deviator_ratio=f"{statistics.fmean(q_full):.4f}",
             p_c=f"{mean('p_c'):.4e}", syy_c=f"{mean('syy_c'):.4e}", phi=f"{mean('phi'):.4f}",
             z=f"{mean('z'):.3f}", z_nr3=f"{mean('z_nr3'):.3f}",
             inertial_number=f"{statistics.fmean(float(r['inertial_number']) for r in steady):.3e}",
             p_kin_over_p=f"{mean('p_kin') / mean('p_c'):.2e}",
             cpu_s=round(float((run_dir / 'cost.txt').read_text()), 1)))
-        curves.append((name, rows, mu))
+        curves.append((name, rows))
     write_csv(a.out / "shear.csv", table)
     print("\nsimple shear, steady state over gamma in [1, 2]: mu = -sxy_c / p_c")
     for r in table:
-        print(f"  {r['name']:24} mu = {r['mu_mean']} ± {r['mu_sd']}  (s1-s2)/(s1+s2) = {r['deviator_ratio']}"
+        print(f"  {r['name']:24} mu = {r['mu_mean']} ± {r['mu_sd']} (s.e. {r['mu_se']})  (s1-s2)/(s1+s2) = {r['deviator_ratio']}"
               f"  p_c = {r['p_c']}  phi = {r['phi']}  z = {r['z']}  I = {r['inertial_number']}"
               f"  p_kin/p = {r['p_kin_over_p']}  {r['cpu_s']} CPU s")
     if curves:
@@ -268,7 +274,7 @@ def shear_report(a, runs):
                '(periodic cell, frictionless, nu = 0.5) at constant normal stress</text>']
         for k, (column, label) in enumerate([("mu", "-sxy_c / p_c"), ("phi", "phi")]):
             xs, ys = [], []
-            for name, rows, mu in curves:
+            for name, rows in curves:
                 xs.append([float(r["shear_strain"]) for r in rows])
                 ys.append([-float(r["sxy_c"]) / float(r["p_c"]) if column == "mu" else float(r["phi"])
                            for r in rows])
