@@ -130,13 +130,17 @@ def jamming_report(a, runs):
               f"  own {r.get('eq69_rms_own_3rule', '')}  p(0.90) {r['p_c_0_90']}  {r['cpu_s']} CPU s")
 
 
+def without_comments(text):
+    return "\n".join(l for l in text.splitlines() if not l.lstrip().startswith("//"))
+
+
 def run(sdem, run_dir, text, threads):
-    """Runs the scenario `text` in `run_dir` unless a finished run of it is there; returns the
-    CPU seconds."""
+    """Runs the scenario `text` in `run_dir` unless a finished run of it (comments aside) is
+    there; returns the CPU seconds."""
     scenario = run_dir.parent / f"{run_dir.name}.ron"
     cost = run_dir / "cost.txt"
-    if (scenario.exists() and scenario.read_text() == text and cost.exists()
-            and (run_dir / "summary.txt").exists()):
+    if (scenario.exists() and without_comments(scenario.read_text()) == without_comments(text)
+            and cost.exists() and (run_dir / "summary.txt").exists()):
         return float(cost.read_text())
     scenario.parent.mkdir(parents=True, exist_ok=True)
     scenario.write_text(text)
