@@ -261,6 +261,18 @@ impl World {
             .extend(self.frames.iter().map(|f| f.shape.bounding_radius));
         let (centers, reach) = (&self.centers, &self.reach);
         let cell = self.cell();
+        if let Some(cell) = &cell {
+            // Checked every step: between rebuilds the cell keeps shrinking.
+            let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+            let range = 2.0 * max_reach + self.neighbors.skin;
+            if cell.check_range(range).is_err() {
+                return Err(Instability::CellTooNarrow {
+                    step: self.step,
+                    width: cell.widths()[0].min(cell.widths()[1]),
+                    range,
+                });
+            }
+        }
         let rebuild = match &cell {
             Some(cell) => self.neighbors.needs_rebuild_periodic(centers, reach, cell),
             None => self.neighbors.needs_rebuild(centers, reach),
@@ -269,19 +281,7 @@ impl World {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
             let old_contacts = std::mem::take(&mut self.pair_contacts);
             match &cell {
-                Some(cell) => {
-                    let max_reach = reach.iter().cloned().fold(0.0, f64::max);
-                    let range = 2.0 * max_reach + self.neighbors.skin;
-                    let width = cell.widths()[0].min(cell.widths()[1]);
-                    if cell.check_range(range).is_err() {
-                        return Err(Instability::CellTooNarrow {
-                            step: self.step,
-                            width,
-                            range,
-                        });
-                    }
-                    self.neighbors.build_periodic(centers, reach, cell);
-                }
+                Some(cell) => self.neighbors.build_periodic(centers, reach, cell),
                 None => self.neighbors.build(centers, reach),
             }
             // Pair indices change with the list: carry each surviving pair's search hint over
