@@ -51,7 +51,18 @@ impl NeighborList {
         if self.reference_centers.len() != centers.len() || self.reference_matrix.is_some() {
             return true;
         }
-        let limit = 0.5 * self.skin;
+        self.any_moved(centers, reach, 0.5 * self.skin, |c, c0| c.distance(c0))
+    }
+
+    /// Whether some grain's displacement since the build (`displacement(centre, reference)`)
+    /// plus its growth reaches `limit`.
+    fn any_moved(
+        &self,
+        centers: &[DVec2],
+        reach: &[f64],
+        limit: f64,
+        displacement: impl Fn(DVec2, DVec2) -> f64 + Sync,
+    ) -> bool {
         centers
             .par_iter()
             .zip(reach.par_iter())
@@ -60,7 +71,7 @@ impl NeighborList {
                     .par_iter()
                     .zip(self.reference_reach.par_iter()),
             )
-            .any(|((c, r), (c0, r0))| c.distance(*c0) + (r - r0).max(0.0) >= limit)
+            .any(|((c, r), (c0, r0))| displacement(*c, *c0) + (r - r0).max(0.0) >= limit)
     }
 
     /// The periodic version of [`needs_rebuild`](Self::needs_rebuild), for a cell that deforms.
@@ -90,19 +101,12 @@ impl NeighborList {
         if budget <= 0.0 {
             return true;
         }
-        centers
-            .par_iter()
-            .zip(reach.par_iter())
-            .zip(
-                self.reference_centers
-                    .par_iter()
-                    .zip(self.reference_reach.par_iter()),
-            )
-            .any(|((c, r), (s0, r0))| {
-                let ds = cell.reduced(*c) - *s0;
-                let moved = cell.matrix * (ds - ds.round());
-                moved.length() + (r - r0).max(0.0) >= budget
-            })
+        // Reduced coordinates are stored: the displacement is `H Δs`, to the nearest lattice
+        // shift (a grain may have been wrapped since).
+        self.any_moved(centers, reach, budget, |c, s0| {
+            let ds = cell.reduced(c) - s0;
+            (cell.matrix * (ds - ds.round())).length()
+        })
     }
 
     /// Rebuilds the list for grains with the given centres and bounding radii.
@@ -351,11 +355,6 @@ mod tests {
         moved[7].x += 0.006;
         assert!(list.needs_rebuild(&moved, &reach));
     }
-}
-
-#[cfg(test)]
-mod periodic_tests {
-    use super::*;
 
     /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
     /// within range, found by brute force over all pairs, each with that image.
