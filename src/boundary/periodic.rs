@@ -33,11 +33,13 @@ pub enum CellError {
     TooNarrow { width: f64, range: f64 },
 }
 
-/// A periodic cell: origin (a corner) and cell matrix, columns h1 and h2.
+/// A periodic cell: origin (a corner) and cell matrix H, columns h1 and h2, with its inverse
+/// (every reduced coordinate and minimum image needs it: it is computed once per cell).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PeriodicCell {
     pub origin: DVec2,
-    pub matrix: DMat2,
+    matrix: DMat2,
+    inverse: DMat2,
 }
 
 impl PeriodicCell {
@@ -48,7 +50,21 @@ impl PeriodicCell {
         if !(det > 0.0 && det.is_finite()) {
             return Err(CellError::Degenerate { h1, h2, det });
         }
-        Ok(Self { origin, matrix })
+        Ok(Self::from_matrix(origin, matrix))
+    }
+
+    /// The cell of matrix `matrix` (columns h1, h2), assumed non-degenerate.
+    fn from_matrix(origin: DVec2, matrix: DMat2) -> Self {
+        Self {
+            origin,
+            matrix,
+            inverse: matrix.inverse(),
+        }
+    }
+
+    /// The cell matrix H (columns h1, h2).
+    pub fn matrix(&self) -> DMat2 {
+        self.matrix
     }
 
     /// The axis-aligned cell `[x0, x0 + width] x [y0, y0 + height]`.
@@ -87,7 +103,7 @@ impl PeriodicCell {
 
     /// Reduced coordinates of a position.
     pub fn reduced(&self, x: DVec2) -> DVec2 {
-        self.matrix.inverse() * (x - self.origin)
+        self.inverse * (x - self.origin)
     }
 
     /// The position of reduced coordinates `s`.
@@ -114,27 +130,13 @@ impl PeriodicCell {
     /// The minimum image of the separation `d = x_j - x_i` and the image shift `n` it took:
     /// `(d - H n, n)`. The nearest image of every pair closer than half the cell's smaller width.
     pub fn minimum_image(&self, d: DVec2) -> (DVec2, [i64; 2]) {
-        let n = (self.matrix.inverse() * d).round();
+        let n = (self.inverse * d).round();
         (d - self.matrix * n, [n.x as i64, n.y as i64])
     }
 
     /// The shift `H n` of image `n`.
     pub fn image_shift(&self, n: [i64; 2]) -> DVec2 {
         self.matrix * DVec2::new(n[0] as f64, n[1] as f64)
-    }
-
-    /// The affine velocity of image `n` relative to the original, under the velocity gradient L.
-    pub fn image_velocity(&self, velocity_gradient: DMat2, n: [i64; 2]) -> DVec2 {
-        velocity_gradient * self.image_shift(n)
-    }
-
-    /// One explicit step of `dH/dt = L H`: `H <- (I + dt L) H`, the origin moving with the
-    /// affine field too (`x0 <- x0 + dt L x0`), so that a point of the cell keeps its reduced
-    /// coordinates.
-    pub fn deform(&mut self, velocity_gradient: DMat2, dt: f64) {
-        let step = DMat2::IDENTITY + velocity_gradient * dt;
-        self.matrix = step * self.matrix;
-        self.origin = step * self.origin;
     }
 
     /// The tilt of h2 along h1 in units of |h1|: 0 for a rectangle, ±1/2 at the remap.
@@ -150,7 +152,9 @@ impl PeriodicCell {
         if k == 0.0 {
             return false;
         }
-        self.matrix.y_axis -= k * self.h1();
+        let mut matrix = self.matrix;
+        matrix.y_axis -= k * self.h1();
+        *self = Self::from_matrix(self.origin, matrix);
         true
     }
 }
@@ -174,10 +178,10 @@ impl PeriodicBoundary {
     /// The cell that `walls` and the tilt describe.
     pub fn cell(&self, walls: &[Wall]) -> PeriodicCell {
         let (width, height) = box_size(walls);
-        PeriodicCell {
-            origin: DVec2::new(walls[LEFT].point.x, walls[BOTTOM].point.y),
-            matrix: DMat2::from_cols(DVec2::new(width, 0.0), DVec2::new(self.tilt, height)),
-        }
+        PeriodicCell::from_matrix(
+            DVec2::new(walls[LEFT].point.x, walls[BOTTOM].point.y),
+            DMat2::from_cols(DVec2::new(width, 0.0), DVec2::new(self.tilt, height)),
+        )
     }
 
     /// Turns the left and right virtual walls along h2, so that the four walls are the cell's
@@ -236,19 +240,17 @@ impl PeriodicBoundary {
         for wall in walls.iter_mut() {
             wall.point += wall.velocity * dt;
         }
-        let after = self.cell(walls);
-        let map = after.matrix * before.matrix.inverse();
-        let turns = (self.tilt / after.h1().x).round();
-        if turns != 0.0 {
-            self.tilt -= turns * after.h1().x;
-        }
+        let mut current = self.cell(walls);
+        let map = current.matrix * before.inverse;
+        let remapped = current.remap();
+        self.tilt = current.h2().x;
         self.orient_walls(walls);
         CellMotion {
             before,
-            current: self.cell(walls),
+            current,
             map,
             velocity_gradient,
-            remapped: turns != 0.0,
+            remapped,
         }
     }
 }
@@ -275,16 +277,13 @@ impl CellMotion {
     }
 }
 
-/// The stress of the cell from its contacts (SPEC §14), tension positive:
-/// `sigma = (1/A) sum sym(f_i ⊗ d_ij)` over `(f_i, d_ij)`: the force on grain i from j and the
-/// branch vector from i to j (minimum image). A pair pressed together gives sigma < 0.
-pub fn cell_stress(contacts: impl IntoIterator<Item = (DVec2, DVec2)>, area: f64) -> DMat2 {
-    let mut sum = DMat2::ZERO;
-    for (force, branch) in contacts {
-        let outer = DMat2::from_cols(force * branch.x, force * branch.y);
-        sum += (outer + outer.transpose()) * 0.5;
-    }
-    sum * (1.0 / area)
+/// `sym(a ⊗ b)` as (xx, yy, xy). A contact's share of the cell stress (SPEC §14, tension
+/// positive) is `sym(f_i ⊗ d_ij) / A`: f_i the force on grain i from j, d_ij the branch vector
+/// from i to j (minimum image); a pair pressed together gives a negative stress. The kinetic
+/// stress is `-sym(m v ⊗ v) / A`.
+#[inline]
+pub fn symmetric_dyad(a: DVec2, b: DVec2) -> [f64; 3] {
+    [a.x * b.x, a.y * b.y, 0.5 * (a.x * b.y + a.y * b.x)]
 }
 
 #[cfg(test)]
@@ -357,36 +356,12 @@ mod tests {
     }
 
     #[test]
-    fn an_affine_deformation_keeps_reduced_coordinates() {
-        // Expectation: points moving with the affine field x' = L x (a contact-free gas at rest
-        // relative to the cell) keep their reduced coordinates exactly in the limit, and to the
-        // integrator's order here: the explicit step is exact for one step of (I + dt L).
-        let mut cell = sheared();
-        let l = DMat2::from_cols(DVec2::new(-0.1, 0.02), DVec2::new(0.3, 0.05));
-        let points: Vec<DVec2> = (0..10)
-            .map(|k| cell.position(DVec2::new(0.1 * k as f64, 0.07 * k as f64)))
-            .collect();
-        let before: Vec<DVec2> = points.iter().map(|&x| cell.reduced(x)).collect();
-        let dt = 1e-3;
-        let mut moved = points.clone();
-        for _ in 0..100 {
-            cell.deform(l, dt);
-            for x in &mut moved {
-                *x += dt * (l * *x);
-            }
-        }
-        for (x, s) in moved.iter().zip(&before) {
-            assert!((cell.reduced(*x) - *s).length() < 1e-12);
-        }
-    }
-
-    #[test]
     fn remapping_keeps_the_lattice_and_bounds_the_tilt() {
         // Expectation: a simple shear to a tilt of 1.3 remaps to a tilt in [-1/2, 1/2], the
         // same area, and the same set of images (each new cell vector is a lattice vector of the
         // old cell with an integer inverse).
-        let mut cell = PeriodicCell::rectangle(DVec2::ZERO, 1.0, 1.0).unwrap();
-        cell.matrix.y_axis.x = 1.3;
+        let mut cell =
+            PeriodicCell::new(DVec2::ZERO, DVec2::new(1.0, 0.0), DVec2::new(1.3, 1.0)).unwrap();
         let old = cell;
         assert!(cell.remap());
         assert!(cell.tilt().abs() <= 0.5, "{}", cell.tilt());
@@ -415,6 +390,12 @@ mod tests {
         assert!(PeriodicCell::new(DVec2::ZERO, DVec2::Y, DVec2::X).is_err());
     }
 
+    /// The cell stress of one contact, `sym(f ⊗ d) / A`, as a matrix.
+    fn contact_stress(force: DVec2, branch: DVec2, area: f64) -> DMat2 {
+        let [xx, yy, xy] = symmetric_dyad(force, branch).map(|v| v / area);
+        DMat2::from_cols(DVec2::new(xx, xy), DVec2::new(xy, yy))
+    }
+
     #[test]
     fn cell_stress_is_objective_and_compressive_for_a_pressed_pair() {
         // Expectation: a pair pressed together (force on i pointing away from j) gives a
@@ -422,12 +403,11 @@ mod tests {
         // stress to R sigma R^T.
         let branch = DVec2::new(0.02, 0.01);
         let force = -3.0 * branch.normalize();
-        let sigma = cell_stress([(force, branch)], 0.5);
+        let sigma = contact_stress(force, branch, 0.5);
         let n = branch.normalize();
         assert!(n.dot(sigma * n) < 0.0);
-        assert!((sigma.x_axis.y - sigma.y_axis.x).abs() < 1e-15);
         let rotation = DMat2::from_angle(0.7);
-        let rotated = cell_stress([(rotation * force, rotation * branch)], 0.5);
+        let rotated = contact_stress(rotation * force, rotation * branch, 0.5);
         let expected = rotation * sigma * rotation.transpose();
         for (a, b) in rotated.to_cols_array().iter().zip(expected.to_cols_array()) {
             assert!((a - b).abs() < 1e-12);

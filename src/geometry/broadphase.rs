@@ -94,7 +94,7 @@ impl NeighborList {
         if self.reference_centers.len() != centers.len() {
             return true;
         }
-        let strain = cell.matrix * reference_matrix.inverse() - DMat2::IDENTITY;
+        let strain = cell.matrix() * reference_matrix.inverse() - DMat2::IDENTITY;
         let strain_norm = strain.x_axis.length_squared() + strain.y_axis.length_squared();
         let max_reach = reach.iter().cloned().fold(0.0, f64::max);
         let budget = 0.5 * (self.skin - strain_norm.sqrt() * (2.0 * max_reach + self.skin));
@@ -105,7 +105,7 @@ impl NeighborList {
         // shift (a grain may have been wrapped since).
         self.any_moved(centers, reach, budget, |c, s0| {
             let ds = cell.reduced(c) - s0;
-            (cell.matrix * (ds - ds.round())).length()
+            (cell.matrix() * (ds - ds.round())).length()
         })
     }
 
@@ -193,14 +193,13 @@ impl NeighborList {
     pub fn build_periodic(&mut self, centers: &[DVec2], reach: &[f64], cell: &PeriodicCell) {
         let n = centers.len();
         if !self.start_build(centers, reach) {
-            self.reference_matrix = Some(cell.matrix);
+            self.reference_matrix = Some(cell.matrix());
             return;
         }
-        let inverse = cell.matrix.inverse();
         for c in &mut self.reference_centers {
-            *c = inverse * (*c - cell.origin);
+            *c = cell.reduced(*c);
         }
-        self.reference_matrix = Some(cell.matrix);
+        self.reference_matrix = Some(cell.matrix());
         let max_reach = reach.iter().cloned().fold(0.0, f64::max);
         let range = (2.0 * max_reach + self.skin).max(f64::MIN_POSITIVE);
         let [width1, width2] = cell.widths();
@@ -287,11 +286,15 @@ impl NeighborList {
     /// [`PeriodicCell::wrap`] moves it), the image of each pair that keeps its branch vector
     /// `x_j + H n - x_i`.
     pub fn follow_wraps(&mut self, wraps: &[[i64; 2]]) {
-        for ([i, j], image) in self.pairs.iter().zip(self.images.iter_mut()) {
-            let (wi, wj) = (wraps[*i as usize], wraps[*j as usize]);
-            image[0] += wj[0] - wi[0];
-            image[1] += wj[1] - wi[1];
-        }
+        self.pairs
+            .par_iter()
+            .zip(self.images.par_iter_mut())
+            .with_min_len(4096)
+            .for_each(|([i, j], image)| {
+                let (wi, wj) = (wraps[*i as usize], wraps[*j as usize]);
+                image[0] += wj[0] - wi[0];
+                image[1] += wj[1] - wi[1];
+            });
     }
 
     /// Indices of the pairs that contain grain g.

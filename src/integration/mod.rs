@@ -22,7 +22,7 @@ pub mod parameters;
 pub use instability::Instability;
 pub use parameters::Parameters;
 
-use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell};
+use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
@@ -330,10 +330,13 @@ impl World {
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
                     // The second grain, or its image that meets the first.
                     let mut shape_j = fj.shape;
+                    // In a periodic cell: the branch vector, and the affine field's `L d`.
+                    let mut branch = DVec2::ZERO;
                     let mut affine_rate = DVec2::ZERO;
                     if let Some((cell, velocity_gradient)) = &periodic {
                         shape_j.center += cell.image_shift(images[p]);
-                        affine_rate = *velocity_gradient * (shape_j.center - fi.shape.center);
+                        branch = shape_j.center - fi.shape.center;
+                        affine_rate = *velocity_gradient * branch;
                     }
                     let mut hint = slot.hint;
                     *slot = PairContact::default();
@@ -373,12 +376,10 @@ impl World {
                                     gap_rate,
                                 );
                                 if periodic.is_some() {
-                                    let on_first = force * c.normal;
-                                    let branch = shape_j.center - fi.shape.center;
-                                    moment[0] += on_first.x * branch.x;
-                                    moment[1] += on_first.y * branch.y;
-                                    moment[2] +=
-                                        0.5 * (on_first.x * branch.y + on_first.y * branch.x);
+                                    let share = symmetric_dyad(force * c.normal, branch);
+                                    for (sum, x) in moment.iter_mut().zip(share) {
+                                        *sum += x;
+                                    }
                                 }
                                 *slot = PairContact {
                                     active: true,
@@ -522,10 +523,10 @@ impl World {
                     sums.totals.kinetic_energy += grain.kinetic_energy(params.material.density);
                     if cell.is_some() {
                         let m = grain.mass(params.material.density);
-                        let v = grain.velocity;
-                        sums.momentum_flux[0] += m * v.x * v.x;
-                        sums.momentum_flux[1] += m * v.y * v.y;
-                        sums.momentum_flux[2] += m * v.x * v.y;
+                        let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
+                        for (sum, x) in sums.momentum_flux.iter_mut().zip(flux) {
+                            *sum += x;
+                        }
                     }
                     sums.totals.elastic_energy += update.elastic_energy;
                     sums.contact_ends += load.contacts as u64;
