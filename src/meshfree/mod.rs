@@ -16,6 +16,7 @@
 
 pub mod assembly;
 pub mod contact;
+pub mod friction;
 pub mod discretization;
 pub mod material;
 pub mod model;
