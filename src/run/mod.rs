@@ -22,7 +22,6 @@ pub use steps::LoopState;
 
 use crate::boundary::loading::{LoadState, LoadingProgram};
 use crate::boundary::periodic::PeriodicBoundary;
-use crate::boundary::walls::box_walls;
 use crate::grain::Grain;
 use crate::integration::{Instability, StepTotals, World};
 use crate::output::MacroWriter;
@@ -214,9 +213,7 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
             )));
         }
     };
-    let b = s.bounds();
-    let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
-    let world = World::new(scenario.parameters(), grains, walls);
+    let world = World::new(scenario.parameters(), grains, scenario.walls());
     Ok(match scenario.boundary {
         Boundary::Walls => world,
         Boundary::Periodic => world.with_periodic(PeriodicBoundary::default()),
