@@ -369,6 +369,9 @@ fn resume_sdem(
     if scenario.model.adaptive().is_some() {
         world.set_levels(&c.runner.levels);
     }
+    world
+        .restore_contact_history(&c.contact_history)
+        .map_err(|e| RunError::Resume(format!("{}: {e}", checkpoint_path.display())))?;
     let sim = Sdem::new(world, scenario, c.runner.last_good.clone());
     run_loop(
         scenario,
