@@ -139,6 +139,10 @@ fn f64_round_trips_bit_exactly() {
             ..Default::default()
         },
         periodic: None,
+        contact_history: sdem::integration::ContactHistory {
+            pairs: vec![([0, 1], -0.0), ([0, 7], 5e-324), ([3, 4], -1.5)],
+            walls: vec![(2, 3, f64::MIN_POSITIVE / 3.0)],
+        },
     };
     let back = Checkpoint::from_bytes(&c.to_bytes(), "mem").unwrap();
     assert_eq!(grain_bits(&back.grains), grain_bits(&grains));
@@ -150,6 +154,19 @@ fn f64_round_trips_bit_exactly() {
     );
     assert_eq!(back.runner.max_loaded_inertial_number.to_bits(), 1);
     assert_eq!(back.scenario, scenario);
+    let history_bits = |h: &sdem::integration::ContactHistory| {
+        let pairs: Vec<_> = h.pairs.iter().map(|(p, f)| (*p, f.to_bits())).collect();
+        let walls: Vec<_> = h
+            .walls
+            .iter()
+            .map(|(g, w, f)| (*g, *w, f.to_bits()))
+            .collect();
+        (pairs, walls)
+    };
+    assert_eq!(
+        history_bits(&back.contact_history),
+        history_bits(&c.contact_history)
+    );
 }
 
 #[test]
@@ -499,6 +516,7 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
             ..Default::default()
         },
         periodic: None,
+        contact_history: Default::default(),
     };
     let good = c.to_bytes();
     assert_eq!(Checkpoint::from_bytes(&good, "mem").unwrap(), c);

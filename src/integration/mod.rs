@@ -24,6 +24,7 @@ pub use parameters::Parameters;
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::Wall;
+use crate::contact::friction::TangentialResponse;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::{
@@ -75,8 +76,27 @@ pub struct PairContact {
     pub cap_area_first: f64,
     pub cap_area_second: f64,
     pub capped: bool,
+    /// Tangential force on the first grain along `t = perp(normal)` (SPEC §13; zero without
+    /// friction); the force on the first grain is `force * normal + tangential_force * t`.
+    pub tangential_force: f64,
+    /// The tangential spring's force, carried to the next step while the contact stays closed.
+    pub tangential_history: f64,
     /// Where this pair's chains were: the next step's search starts there.
     pub hint: PairHint,
+}
+
+impl PairContact {
+    /// The contact force on the pair's first grain (on the second: its opposite).
+    #[inline]
+    pub fn force_on_first(&self) -> DVec2 {
+        let normal = self.force * self.normal;
+        // Frictionless contacts keep the sums of before friction existed, signed zeros included.
+        if self.tangential_force == 0.0 {
+            normal
+        } else {
+            normal + self.tangential_force * self.normal.perp()
+        }
+    }
 }
 
 /// Per-grain quantities of the last step, kept for output.
@@ -121,6 +141,23 @@ pub struct StepTotals {
     /// Periodic cell only: the kinetic stress `-(1/A) sum m v ⊗ v` of the grains' velocities
     /// relative to the affine field (xx, yy, xy), tension positive.
     pub kinetic_stress: [f64; 3],
+    /// Energy dissipated by Coulomb sliding over the step, grain–grain and grain–wall.
+    pub friction_dissipation: f64,
+    /// Contacts sliding at the Coulomb limit (grain–grain and grain–wall).
+    pub sliding_contacts: u64,
+}
+
+/// Sums over the grain–grain contacts of one step.
+#[derive(Debug, Clone, Copy, Default)]
+struct PairSums {
+    /// Contacts whose law denominator was held at its floor.
+    capped: u64,
+    /// Periodic cell only: `sum sym(f_i ⊗ d_ij)` (xx, yy, xy).
+    moment: [f64; 3],
+    /// Energy dissipated by sliding.
+    dissipation: f64,
+    sliding: u64,
+    failure: Option<Instability>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -130,6 +167,22 @@ struct ChunkSums {
     momentum_flux: [f64; 3],
     contact_ends: u64,
     failure: Option<Instability>,
+}
+
+/// The tangential history of a world's contacts (SPEC §13): the spring force of each closed
+/// frictional contact, which a checkpoint must keep for a bitwise resume.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ContactHistory {
+    /// `([i, j], F_t)` of each grain pair (i < j as listed) with a history, in pair order.
+    pub pairs: Vec<([u32; 2], f64)>,
+    /// `(grain, wall, F_t)` of each grain–wall contact with a history, in grain order.
+    pub walls: Vec<(u32, u32, f64)>,
+}
+
+impl ContactHistory {
+    pub fn is_empty(&self) -> bool {
+        self.pairs.is_empty() && self.walls.is_empty()
+    }
 }
 
 /// Everything that evolves: grains, walls, time; plus the per-step work arrays.
@@ -157,6 +210,9 @@ pub struct World {
     reach: Vec<f64>,
     /// Per-step scratch of a periodic cell: the image shift each grain was wrapped by.
     wraps: Vec<[i64; 2]>,
+    /// The tangential spring force of each grain's contact with each wall (SPEC §13; zero when
+    /// the contact is open), kept for every grain so that the grain pass can own its row.
+    wall_history: Vec<[f64; MAX_WALLS]>,
 }
 
 impl World {
@@ -189,6 +245,7 @@ impl World {
             centers: Vec::with_capacity(n),
             reach: Vec::with_capacity(n),
             wraps: Vec::new(),
+            wall_history: vec![[0.0; MAX_WALLS]; n],
         };
         world.count_levels();
         world
@@ -237,8 +294,74 @@ impl World {
         self
     }
 
+    /// The tangential history of the contacts after the last step (entries whose bit pattern
+    /// is not +0.0).
+    pub fn contact_history(&self) -> ContactHistory {
+        let pairs = self
+            .neighbors
+            .pairs
+            .iter()
+            .zip(&self.pair_contacts)
+            .filter(|(_, c)| c.tangential_history.to_bits() != 0)
+            .map(|(&pair, c)| (pair, c.tangential_history))
+            .collect();
+        let mut walls = Vec::new();
+        for (g, row) in self.wall_history.iter().enumerate() {
+            for (w, &h) in row.iter().enumerate() {
+                if h.to_bits() != 0 {
+                    walls.push((g as u32, w as u32, h));
+                }
+            }
+        }
+        ContactHistory { pairs, walls }
+    }
+
+    /// Restores the tangential history of a checkpoint (before the first step of a resumed
+    /// run: the next neighbour-list build carries the pairs' history over, as it does between
+    /// builds).
+    pub fn restore_contact_history(&mut self, history: &ContactHistory) -> Result<(), String> {
+        let n = self.grains.len() as u32;
+        let sorted = history.pairs.windows(2).all(|w| w[0].0 < w[1].0);
+        if !sorted {
+            return Err("contact history pairs out of order".into());
+        }
+        if let Some(([i, j], _)) = history.pairs.iter().find(|([i, j], _)| i >= j || *j >= n) {
+            return Err(format!(
+                "contact history of the pair ({i}, {j}) with {n} grains"
+            ));
+        }
+        if let Some((g, w, _)) = history
+            .walls
+            .iter()
+            .find(|(g, w, _)| *g >= n || *w as usize >= self.walls.len())
+        {
+            return Err(format!(
+                "contact history of grain {g} on wall {w} with {n} grains and {} walls",
+                self.walls.len()
+            ));
+        }
+        self.neighbors.pairs = history.pairs.iter().map(|(pair, _)| *pair).collect();
+        self.pair_contacts = history
+            .pairs
+            .iter()
+            .map(|&(_, h)| PairContact {
+                tangential_history: h,
+                ..Default::default()
+            })
+            .collect();
+        self.neighbors.invalidate();
+        self.wall_history = vec![[0.0; MAX_WALLS]; self.grains.len()];
+        for &(g, w, h) in &history.walls {
+            self.wall_history[g as usize][w as usize] = h;
+        }
+        Ok(())
+    }
+
     /// Recomputes shapes, velocity fields and the neighbour list for the current state.
     fn prepare(&mut self) -> Result<(), Instability> {
+        // A grain added after construction gets an empty row of wall history.
+        self.wall_history
+            .resize(self.grains.len(), [0.0; MAX_WALLS]);
         let density = self.params.material.density;
         self.grains
             .par_iter()
@@ -294,6 +417,7 @@ impl World {
                 }
                 if k < old_pairs.len() && old_pairs[k] == *pair {
                     slot.hint = old_contacts[k].hint;
+                    slot.tangential_history = old_contacts[k].tangential_history;
                 }
             }
         }
@@ -302,9 +426,8 @@ impl World {
         Ok(())
     }
 
-    /// Contact geometry and forces of every candidate pair; the capped contacts and, in a
-    /// periodic cell, `sum sym(f_i ⊗ d_ij)` (xx, yy, xy).
-    fn compute_pair_contacts(&mut self) -> Result<(u64, [f64; 3]), Instability> {
+    /// Contact geometry and forces of every candidate pair, and their sums.
+    fn compute_pair_contacts(&mut self) -> Result<PairSums, Instability> {
         let params = &self.params;
         let table = &self.table;
         let frames = &self.frames;
@@ -316,7 +439,7 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
-        let chunk_results: Vec<(u64, [f64; 3], Option<Instability>)> = self
+        let chunk_results: Vec<PairSums> = self
             .pair_contacts
             .par_chunks_mut(PAIR_CHUNK)
             .enumerate()
@@ -324,6 +447,8 @@ impl World {
                 let mut capped = 0;
                 let mut moment = [0.0; 3];
                 let mut failure = None;
+                let mut dissipation = 0.0;
+                let mut sliding = 0;
                 for (k, slot) in out.iter_mut().enumerate() {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
@@ -339,6 +464,7 @@ impl World {
                         affine_rate = *velocity_gradient * branch;
                     }
                     let mut hint = slot.hint;
+                    let history = slot.tangential_history;
                     *slot = PairContact::default();
                     let overlap = grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint);
                     slot.hint = hint;
@@ -364,8 +490,9 @@ impl World {
                             Ok(response) => {
                                 let velocity_j =
                                     fj.velocity + fj.velocity_gradient * (c.point - shape_j.center);
-                                let gap_rate = (velocity_j - fi.velocity_at(c.point) + affine_rate)
-                                    .dot(c.normal);
+                                let relative_velocity =
+                                    velocity_j - fi.velocity_at(c.point) + affine_rate;
+                                let gap_rate = relative_velocity.dot(c.normal);
                                 let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
                                 capped += response.capped as u64;
                                 let force = damped_normal_force(
@@ -375,12 +502,22 @@ impl World {
                                     params.contact_damping,
                                     gap_rate,
                                 );
-                                if periodic.is_some() {
-                                    let share = symmetric_dyad(force * c.normal, branch);
-                                    for (sum, x) in moment.iter_mut().zip(share) {
-                                        *sum += x;
+                                let tangential = match &params.friction {
+                                    Some(friction) if friction.grains > 0.0 => {
+                                        friction.law.response(
+                                            history,
+                                            response.stiffness,
+                                            force,
+                                            relative_velocity.dot(c.normal.perp()),
+                                            friction.grains,
+                                            effective_mass,
+                                            params.dt,
+                                        )
                                     }
-                                }
+                                    _ => TangentialResponse::default(),
+                                };
+                                dissipation += tangential.dissipated;
+                                sliding += tangential.sliding as u64;
                                 *slot = PairContact {
                                     active: true,
                                     normal: c.normal,
@@ -391,33 +528,48 @@ impl World {
                                     cap_area_first: c.cap_area_i,
                                     cap_area_second: c.cap_area_j,
                                     capped: response.capped,
+                                    tangential_force: tangential.force,
+                                    tangential_history: tangential.history,
                                     hint,
                                 };
+                                if periodic.is_some() {
+                                    let share = symmetric_dyad(slot.force_on_first(), branch);
+                                    for (sum, x) in moment.iter_mut().zip(share) {
+                                        *sum += x;
+                                    }
+                                }
                             }
                         },
                     }
                 }
-                (capped, moment, failure)
+                PairSums {
+                    capped,
+                    moment,
+                    dissipation,
+                    sliding,
+                    failure,
+                }
             })
             .collect();
-        let mut capped = 0;
-        let mut moment = [0.0; 3];
-        for (c, m, failure) in chunk_results {
-            if let Some(f) = failure {
+        let mut totals = PairSums::default();
+        for sums in chunk_results {
+            if let Some(f) = sums.failure {
                 return Err(f);
             }
-            capped += c;
-            for (sum, x) in moment.iter_mut().zip(m) {
+            totals.capped += sums.capped;
+            for (sum, x) in totals.moment.iter_mut().zip(sums.moment) {
                 *sum += x;
             }
+            totals.dissipation += sums.dissipation;
+            totals.sliding += sums.sliding;
         }
-        Ok((capped, moment))
+        Ok(totals)
     }
 
     /// Advances the world by one time step.
     pub fn step(&mut self) -> Result<&StepTotals, Instability> {
         self.prepare()?;
-        let (capped_pairs, contact_moment) = self.compute_pair_contacts()?;
+        let pair_sums = self.compute_pair_contacts()?;
 
         let params = &self.params;
         let table = &self.table;
@@ -433,13 +585,15 @@ impl World {
             .par_chunks_mut(GRAIN_CHUNK)
             .zip(self.grain_stress.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.levels.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.wall_history.par_chunks_mut(GRAIN_CHUNK))
             .enumerate()
-            .map(|(chunk, ((grains, stresses), levels))| {
+            .map(|(chunk, (((grains, stresses), levels), wall_histories))| {
                 let mut sums = ChunkSums::default();
-                for (k, ((grain, stress), level)) in grains
+                for (k, (((grain, stress), level), wall_history)) in grains
                     .iter_mut()
                     .zip(stresses.iter_mut())
                     .zip(levels.iter_mut())
+                    .zip(wall_histories.iter_mut())
                     .enumerate()
                 {
                     let g = chunk * GRAIN_CHUNK + k;
@@ -452,7 +606,7 @@ impl World {
                         }
                         let first = neighbors.pairs[p as usize][0] as usize == g;
                         let (force, cap, center) = if first {
-                            (c.force * c.normal, c.cap_area_first, frame.shape.center)
+                            (c.force_on_first(), c.cap_area_first, frame.shape.center)
                         } else {
                             // The contact point lies at the image of this grain that met the first.
                             let image = match &cell {
@@ -460,7 +614,7 @@ impl World {
                                 None => DVec2::ZERO,
                             };
                             (
-                                -c.force * c.normal,
+                                -c.force_on_first(),
                                 c.cap_area_second,
                                 frame.shape.center + image,
                             )
@@ -469,6 +623,8 @@ impl World {
                         load.contacts += 1;
                     }
                     for (w, wall) in walls.iter().enumerate() {
+                        // A contact that is open this step drops its history.
+                        let history = std::mem::take(&mut wall_history[w]);
                         // Most grains are far from every wall: skip the call.
                         if wall.height(frame.shape.center) >= frame.shape.bounding_radius {
                             continue;
@@ -494,8 +650,10 @@ impl World {
                                         });
                                     }
                                     Ok(response) => {
-                                        let gap_rate = (wall.velocity - frame.velocity_at(c.point))
-                                            .dot(c.normal);
+                                        // The wall is the contact's second body.
+                                        let relative_velocity =
+                                            wall.velocity - frame.velocity_at(c.point);
+                                        let gap_rate = relative_velocity.dot(c.normal);
                                         let f = damped_normal_force(
                                             response.force,
                                             response.stiffness,
@@ -503,10 +661,28 @@ impl World {
                                             params.contact_damping,
                                             gap_rate,
                                         );
-                                        let force = f * c.normal;
+                                        let normal_force = f * c.normal;
+                                        let mut force = normal_force;
+                                        if let Some(friction) = &params.friction
+                                            && friction.walls[w] > 0.0
+                                        {
+                                            let t = friction.law.response(
+                                                history,
+                                                response.stiffness,
+                                                f,
+                                                relative_velocity.dot(c.normal.perp()),
+                                                friction.walls[w],
+                                                frame.mass,
+                                                params.dt,
+                                            );
+                                            wall_history[w] = t.history;
+                                            force += t.force * c.normal.perp();
+                                            sums.totals.friction_dissipation += t.dissipated;
+                                            sums.totals.sliding_contacts += t.sliding as u64;
+                                        }
                                         load.add(force, c.point - frame.shape.center, c.cap_area_i);
                                         load.wall_contacts += 1;
-                                        sums.totals.wall_force[w] += force.dot(wall.normal);
+                                        sums.totals.wall_force[w] += normal_force.dot(wall.normal);
                                         sums.totals.capped_contacts += response.capped as u64;
                                     }
                                 }
@@ -536,7 +712,9 @@ impl World {
             .collect();
 
         let mut totals = StepTotals {
-            capped_contacts: capped_pairs,
+            capped_contacts: pair_sums.capped,
+            friction_dissipation: pair_sums.dissipation,
+            sliding_contacts: pair_sums.sliding,
             ..Default::default()
         };
         let mut contact_ends = 0;
@@ -555,6 +733,8 @@ impl World {
             totals.kinetic_energy += sums.totals.kinetic_energy;
             totals.elastic_energy += sums.totals.elastic_energy;
             totals.capped_contacts += sums.totals.capped_contacts;
+            totals.friction_dissipation += sums.totals.friction_dissipation;
+            totals.sliding_contacts += sums.totals.sliding_contacts;
             for l in 0..3 {
                 totals.level_counts[l] += sums.totals.level_counts[l];
             }
@@ -567,7 +747,7 @@ impl World {
                 let area_before = periodic.cell(&self.walls).area();
                 let motion = periodic.advance(&mut self.walls, dt);
                 let area = motion.current.area();
-                totals.cell_stress = contact_moment.map(|m| m / area_before);
+                totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
                 totals.kinetic_stress = momentum_flux.map(|m| -m / area);
                 self.follow_cell(&motion);
             }
@@ -737,6 +917,9 @@ fn advance_grain(
     // Rigid-body motion.
     let mass = grain.mass(density);
     grain.velocity += load.force * (dt / mass);
+    if params.gravity != DVec2::ZERO {
+        grain.velocity += params.gravity * dt;
+    }
     grain.omega += load.torque / grain.rotational_inertia(density) * dt;
     grain.center += grain.velocity * dt;
     grain.theta += grain.omega * dt;

@@ -1,7 +1,10 @@
 //! Numerical and physical parameters of the time step, and the critical time step (SPEC §9).
 
 use crate::contact::SecantLaw;
+use crate::contact::friction::{FrictionSettings, TangentialLaw};
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
+use crate::integration::MAX_WALLS;
+use glam::DVec2;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Parameters {
@@ -25,6 +28,43 @@ pub struct Parameters {
     pub dt: f64,
     /// Verlet skin, as a fraction of the mean radius.
     pub skin_fraction: f64,
+    /// Coulomb friction (SPEC §13); `None`: every contact is frictionless.
+    pub friction: Option<Friction>,
+    /// Body force per unit mass.
+    pub gravity: DVec2,
+}
+
+/// Coulomb friction of a world's contacts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Friction {
+    pub law: TangentialLaw,
+    /// mu between grains.
+    pub grains: f64,
+    /// mu of each wall, in the order of the world's walls.
+    pub walls: [f64; MAX_WALLS],
+}
+
+impl Friction {
+    /// The friction of a scenario's settings, with `walls` the coefficient of each wall; `None`
+    /// when every coefficient is zero.
+    pub fn new(settings: &FrictionSettings, walls: &[f64]) -> Option<Self> {
+        assert!(walls.len() <= MAX_WALLS, "at most {MAX_WALLS} walls");
+        if settings.grains == 0.0 && walls.iter().all(|&mu| mu == 0.0) {
+            return None;
+        }
+        let mut per_wall = [0.0; MAX_WALLS];
+        per_wall[..walls.len()].copy_from_slice(walls);
+        Some(Self {
+            law: TangentialLaw::from(settings),
+            grains: settings.grains,
+            walls: per_wall,
+        })
+    }
+
+    /// `r_t` for the critical time step.
+    pub fn stiffness_ratio(friction: &Option<Self>) -> f64 {
+        friction.map_or(0.0, |f| f.law.stiffness_ratio)
+    }
 }
 
 impl Parameters {
@@ -43,6 +83,8 @@ impl Parameters {
             alpha_mass_scale: 1.0,
             dt,
             skin_fraction: 0.2,
+            friction: None,
+            gravity: DVec2::ZERO,
         }
     }
 }
@@ -65,11 +107,20 @@ impl Adaptive {
         material: &Material,
         law: &SecantLaw,
         min_radius: f64,
+        tangential_ratio: f64,
     ) -> Self {
         Self {
             settings,
-            dt: ModelLevel::ALL
-                .map(|level| fraction * critical_time_step(material, law, min_radius, level)),
+            dt: ModelLevel::ALL.map(|level| {
+                fraction
+                    * frictional_critical_time_step(
+                        material,
+                        law,
+                        min_radius,
+                        level,
+                        tangential_ratio,
+                    )
+            }),
         }
     }
 }
@@ -88,6 +139,11 @@ pub struct StiffestModes {
     /// six contacts, measured: the dense `sdem bench` packing goes unstable between 0.5 and 0.55
     /// of the single-contact estimate (tests/stability.rs).
     pub contact: f64,
+    /// Tangential contact mode (friction, SPEC §13) at `K_t = r_t E/a`: the same lattice
+    /// estimate with the tangential coupling, 1 + 2 (translation, and rotation at lever arm R:
+    /// `R^2 m / M_theta = 2` for a disc) + 4 for the strain DoF of deformable grains. Zero
+    /// without friction.
+    pub tangential: f64,
 }
 
 pub fn stiffest_modes(
@@ -95,10 +151,15 @@ pub fn stiffest_modes(
     law: &SecantLaw,
     radius: f64,
     level: ModelLevel,
+    tangential_ratio: f64,
 ) -> StiffestModes {
     let mass = material.density * std::f64::consts::PI * radius * radius;
     let coupling = if level == ModelLevel::Rigid { 1.0 } else { 5.0 };
     let contact = (4.0 * law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
+    let tangential_coupling = if level == ModelLevel::Rigid { 3.0 } else { 7.0 };
+    let tangential = (4.0 * tangential_ratio * law.initial_stiffness() * 2.0 / mass
+        * tangential_coupling)
+        .sqrt();
     let deformation = if level == ModelLevel::Rigid {
         0.0
     } else {
@@ -107,6 +168,7 @@ pub fn stiffest_modes(
     StiffestModes {
         deformation,
         contact,
+        tangential,
     }
 }
 
@@ -126,11 +188,25 @@ pub fn critical_time_step(
     min_radius: f64,
     level: ModelLevel,
 ) -> f64 {
-    let modes = stiffest_modes(material, law, min_radius, level);
+    frictional_critical_time_step(material, law, min_radius, level, 0.0)
+}
+
+/// [`critical_time_step`] with frictional contacts of tangential stiffness ratio `r_t`
+/// (0: frictionless): the tangential mode is a mode of its own, so the stiffer of the normal
+/// and tangential contact modes counts.
+pub fn frictional_critical_time_step(
+    material: &Material,
+    law: &SecantLaw,
+    min_radius: f64,
+    level: ModelLevel,
+    tangential_ratio: f64,
+) -> f64 {
+    let modes = stiffest_modes(material, law, min_radius, level, tangential_ratio);
+    let contact = modes.contact.max(modes.tangential);
     let omega_max = if material.is_incompressible() || level == ModelLevel::Rigid {
-        modes.deformation.max(modes.contact)
+        modes.deformation.max(contact)
     } else {
-        (modes.deformation * modes.deformation + modes.contact * modes.contact).sqrt()
+        (modes.deformation * modes.deformation + contact * contact).sqrt()
     };
     2.0 / omega_max
 }

@@ -32,7 +32,7 @@ use crate::boundary::loading::LoadingProgram;
 use crate::boundary::periodic::PeriodicBoundary;
 use crate::boundary::walls::Wall;
 use crate::grain::{Grain, GrainLevel, ModelLevel};
-use crate::integration::{MAX_WALLS, StepTotals};
+use crate::integration::{ContactHistory, MAX_WALLS, StepTotals};
 use crate::scenario::{LoadedSample, Scenario};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -238,6 +238,9 @@ impl TotalsBits {
             level_counts: self.level_counts,
             cell_stress: self.cell_stresses.map_or([0.0; 3], |s| s[0].map(f64::from)),
             kinetic_stress: self.cell_stresses.map_or([0.0; 3], |s| s[1].map(f64::from)),
+            // Per-step figures of friction, recomputed by the next step.
+            friction_dissipation: 0.0,
+            sliding_contacts: 0,
         })
     }
 }
@@ -416,6 +419,43 @@ pub struct Stored {
     /// [`PeriodicBoundary`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub periodic: Option<[Bits; 3]>,
+    /// Frictional runs only: the tangential spring force of each closed contact (SPEC §13),
+    /// grain pairs `(i, j, F_t)` and grain–wall contacts `(grain, wall, F_t)`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_history: Option<HistoryBits>,
+}
+
+/// The tangential history of the contacts, floats as bits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HistoryBits {
+    pub pairs: Vec<(u32, u32, Bits)>,
+    pub walls: Vec<(u32, u32, Bits)>,
+}
+
+impl From<&ContactHistory> for HistoryBits {
+    fn from(h: &ContactHistory) -> Self {
+        HistoryBits {
+            pairs: h
+                .pairs
+                .iter()
+                .map(|&([i, j], f)| (i, j, f.into()))
+                .collect(),
+            walls: h.walls.iter().map(|&(g, w, f)| (g, w, f.into())).collect(),
+        }
+    }
+}
+
+impl From<&HistoryBits> for ContactHistory {
+    fn from(h: &HistoryBits) -> Self {
+        ContactHistory {
+            pairs: h
+                .pairs
+                .iter()
+                .map(|&(i, j, f)| ([i, j], f.into()))
+                .collect(),
+            walls: h.walls.iter().map(|&(g, w, f)| (g, w, f.into())).collect(),
+        }
+    }
 }
 
 /// A checkpoint in memory.
@@ -434,6 +474,8 @@ pub struct Checkpoint {
     pub runner: RunnerState,
     /// The periodic cell's state beyond its virtual walls (None in a box).
     pub periodic: Option<PeriodicBoundary>,
+    /// The tangential history of the frictional contacts (empty without friction).
+    pub contact_history: ContactHistory,
 }
 
 fn grains_bits(g: &[Grain]) -> Vec<GrainBits> {
@@ -478,6 +520,8 @@ impl Checkpoint {
             periodic: self
                 .periodic
                 .map(|p| [p.tilt.into(), p.shear_rate.into(), p.shear_strain.into()]),
+            contact_history: (!self.contact_history.is_empty())
+                .then(|| HistoryBits::from(&self.contact_history)),
         }
     }
 
@@ -590,6 +634,11 @@ impl Checkpoint {
                     shear_rate: shear_rate.into(),
                     shear_strain: shear_strain.into(),
                 }),
+            contact_history: s
+                .contact_history
+                .as_ref()
+                .map(ContactHistory::from)
+                .unwrap_or_default(),
             scenario: s.scenario,
         })
     }

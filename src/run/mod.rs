@@ -22,7 +22,6 @@ pub use steps::LoopState;
 
 use crate::boundary::loading::{LoadState, LoadingProgram};
 use crate::boundary::periodic::PeriodicBoundary;
-use crate::boundary::walls::box_walls;
 use crate::grain::Grain;
 use crate::integration::{Instability, StepTotals, World};
 use crate::output::MacroWriter;
@@ -214,9 +213,7 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
             )));
         }
     };
-    let b = s.bounds();
-    let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
-    let world = World::new(scenario.parameters(), grains, walls);
+    let world = World::new(scenario.parameters(), grains, scenario.walls());
     Ok(match scenario.boundary {
         Boundary::Walls => world,
         Boundary::Periodic => world.with_periodic(PeriodicBoundary::default()),
@@ -372,6 +369,9 @@ fn resume_sdem(
     if scenario.model.adaptive().is_some() {
         world.set_levels(&c.runner.levels);
     }
+    world
+        .restore_contact_history(&c.contact_history)
+        .map_err(|e| RunError::Resume(format!("{}: {e}", checkpoint_path.display())))?;
     let sim = Sdem::new(world, scenario, c.runner.last_good.clone());
     run_loop(
         scenario,

@@ -199,6 +199,7 @@ impl Simulation for Sdem {
             program: run.program.clone(),
             runner: RunnerState::new(run.state, self.last_good.clone(), levels),
             periodic: world.periodic,
+            contact_history: world.contact_history(),
         }
         .write_atomic(path)
     }

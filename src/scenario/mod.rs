@@ -10,15 +10,18 @@
 //! scenarios and checkpoints readable.
 
 use crate::boundary::loading::{Phase, StopWhen, StrainRate};
+use crate::boundary::walls::{Wall, box_walls};
 use crate::contact::SecantLaw;
+use crate::contact::friction::FrictionSettings;
 use crate::grain::Grain;
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
-use crate::integration::parameters::{Adaptive, critical_time_step};
+use crate::integration::parameters::{Adaptive, Friction, frictional_critical_time_step};
 use crate::meshfree::shape::{ShapeFileError, StarShape, read_shape_file};
 use crate::meshfree::{HyperelasticLaw, SolverSettings, TimeScheme};
 use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
 use crate::sample::{MAX_COUNT, RadiusDistribution, SampleError, SampleSpec};
+use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -48,9 +51,12 @@ pub struct Scenario {
     pub loading: Vec<Phase>,
     #[serde(default)]
     pub output: OutputSettings,
-    /// Body force per unit mass (meshfree model only), e.g. `(0.0, -9.81)`.
+    /// Body force per unit mass, e.g. `(0.0, -9.81)`.
     #[serde(default, skip_serializing_if = "is_zero_origin")]
     pub gravity: (f64, f64),
+    /// Fixed rigid walls at any angle besides the box's four (an inclined plane), walls only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub planes: Vec<Plane>,
     /// What bounds the sample: walls (the default) or a periodic cell.
     #[serde(default, skip_serializing_if = "Boundary::is_walls")]
     pub boundary: Boundary,
@@ -58,6 +64,21 @@ pub struct Scenario {
 
 fn default_seed() -> u64 {
     1
+}
+
+/// Most planes a scenario may add to the four box walls.
+pub const MAX_PLANES: usize = crate::integration::MAX_WALLS - 4;
+
+/// A fixed rigid wall: the line through `point` with `normal` pointing to the grains' side.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plane {
+    pub point: (f64, f64),
+    /// Need not be of unit length.
+    pub normal: (f64, f64),
+    /// Coulomb coefficient mu between the grains and this plane.
+    #[serde(default)]
+    pub friction: f64,
 }
 
 /// What bounds the sample.
@@ -556,6 +577,9 @@ pub struct ContactSettings {
     pub domain_floor: f64,
     /// Verlet skin as a fraction of the mean radius.
     pub skin: f64,
+    /// Coulomb friction (SPEC §13): frictionless unless set.
+    #[serde(skip_serializing_if = "FrictionSettings::is_default")]
+    pub friction: FrictionSettings,
 }
 
 impl Default for ContactSettings {
@@ -568,6 +592,7 @@ impl Default for ContactSettings {
             on_domain_exit: DomainExitPolicy::Stop,
             domain_floor: 0.05,
             skin: 0.2,
+            friction: FrictionSettings::default(),
         }
     }
 }
@@ -793,8 +818,8 @@ impl Scenario {
         Ok(warnings)
     }
 
-    /// What only one solver accepts: the meshfree settings, shapes and gravity (meshfree), an
-    /// affine phase or a critical-fraction time step (SDEM).
+    /// What only one solver accepts: the meshfree settings and shapes (meshfree), an affine
+    /// phase or a critical-fraction time step (SDEM).
     fn validate_solver_choice(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
         let Model::Meshfree(s) = self.model else {
             if let Some(shapes) = &self.sample.shapes
@@ -807,20 +832,13 @@ impl Scenario {
                      grains of any shape)",
                 ));
             }
-            if self.gravity != (0.0, 0.0) {
-                return Err(invalid(
-                    "gravity",
-                    format!("({}, {})", num(self.gravity.0), num(self.gravity.1)),
-                    "(0, 0), or left out: only the meshfree model has body forces",
-                ));
-            }
             return Ok(());
         };
-        if !(self.gravity.0.is_finite() && self.gravity.1.is_finite()) {
+        if self.tangential_ratio() > 0.0 {
             return Err(invalid(
-                "gravity",
-                format!("({}, {})", num(self.gravity.0), num(self.gravity.1)),
-                "two finite numbers",
+                "contact.friction / planes[..].friction",
+                "a non-zero coefficient",
+                "zero for model: Meshfree (its frictional contacts are not written yet)",
             ));
         }
         if self.material.poisson >= 0.5 {
@@ -930,8 +948,16 @@ impl Scenario {
                 invalid(&format!("model.Adaptive.{field}"), num(value), allowed)
             })?;
         }
+        if !(self.gravity.0.is_finite() && self.gravity.1.is_finite()) {
+            return Err(invalid(
+                "gravity",
+                format!("({}, {})", num(self.gravity.0), num(self.gravity.1)),
+                "two finite numbers",
+            ));
+        }
         self.validate_solver_choice(&mut warnings)?;
         self.validate_boundary(&mut warnings)?;
+        self.validate_friction()?;
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
@@ -1074,6 +1100,91 @@ impl Scenario {
             _ => {}
         }
         Ok(warnings)
+    }
+
+    /// Friction coefficients and the tangential spring; the planes.
+    fn validate_friction(&self) -> Result<(), ScenarioError> {
+        self.contact
+            .friction
+            .check()
+            .map_err(|(field, value, allowed)| {
+                invalid(&format!("contact.friction.{field}"), num(value), allowed)
+            })?;
+        if self.planes.len() > MAX_PLANES {
+            return Err(invalid(
+                "planes",
+                format!("{} planes", self.planes.len()),
+                &format!("at most {MAX_PLANES} (besides the four box walls)"),
+            ));
+        }
+        if !self.planes.is_empty() && !self.boundary.is_walls() {
+            return Err(invalid(
+                "planes",
+                format!("{} planes", self.planes.len()),
+                "none in a periodic cell (boundary: Periodic has no walls)",
+            ));
+        }
+        for (k, plane) in self.planes.iter().enumerate() {
+            let (x, y) = plane.point;
+            if !(x.is_finite() && y.is_finite()) {
+                return Err(invalid(
+                    &format!("planes[{k}].point"),
+                    format!("({}, {})", num(x), num(y)),
+                    "two finite numbers",
+                ));
+            }
+            let (nx, ny) = plane.normal;
+            let length = nx.hypot(ny);
+            if !(length.is_finite() && length > 0.0) {
+                return Err(invalid(
+                    &format!("planes[{k}].normal"),
+                    format!("({}, {})", num(nx), num(ny)),
+                    "a finite vector of non-zero length, pointing to the grains' side",
+                ));
+            }
+            if !(plane.friction.is_finite() && plane.friction >= 0.0) {
+                return Err(invalid(
+                    &format!("planes[{k}].friction"),
+                    num(plane.friction),
+                    "a finite number >= 0 (0: frictionless)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The walls of a run: the sample box's four (in the order of
+    /// [`crate::boundary::walls::box_walls`]), then the planes.
+    pub fn walls(&self) -> Vec<Wall> {
+        let b = self.sample.bounds();
+        let mut walls = box_walls(b.x0, b.x1, b.y0, b.y1);
+        walls.extend(self.planes.iter().map(|p| {
+            Wall::new(
+                DVec2::new(p.point.0, p.point.1),
+                DVec2::new(p.normal.0, p.normal.1),
+            )
+        }));
+        walls
+    }
+
+    /// Coulomb coefficient of each wall: the four box walls' (`contact.friction.walls`), then
+    /// the planes'.
+    pub fn wall_friction(&self) -> Vec<f64> {
+        let mut mu = vec![self.contact.friction.walls; 4];
+        mu.extend(self.planes.iter().map(|p| p.friction));
+        mu
+    }
+
+    /// `r_t` of the scenario's frictional contacts, 0 when every contact is frictionless (it
+    /// enters the critical time step).
+    pub fn tangential_ratio(&self) -> f64 {
+        let frictional = !self.contact.friction.is_frictionless()
+            || self.planes.iter().any(|p| p.friction > 0.0);
+        if frictional {
+            self.contact.friction.stiffness_ratio
+        } else {
+            0.0
+        }
     }
 
     /// The periodic cell's checks: SDEM only; a cell at least twice the interaction range wide;
@@ -1250,21 +1361,23 @@ impl Scenario {
     }
 
     pub fn critical_time_step(&self) -> f64 {
-        critical_time_step(
+        frictional_critical_time_step(
             &self.material,
             &self.secant_law(),
             self.smallest_radius(),
             self.model.level(),
+            self.tangential_ratio(),
         )
     }
 
     /// The critical time step while every grain is rigid (the adaptive model's largest step).
     pub fn rigid_critical_time_step(&self) -> f64 {
-        critical_time_step(
+        frictional_critical_time_step(
             &self.material,
             &self.secant_law(),
             self.smallest_radius(),
             ModelLevel::Rigid,
+            self.tangential_ratio(),
         )
     }
 
@@ -1305,6 +1418,7 @@ impl Scenario {
                 &self.material,
                 &self.secant_law(),
                 self.smallest_radius(),
+                self.tangential_ratio(),
             ),
             TimeStep::Fixed(dt) => Adaptive {
                 settings,
@@ -1323,6 +1437,8 @@ impl Scenario {
             alpha_mass_scale: self.deformation.alpha_mass_scale,
             dt: self.time_step_value(),
             skin_fraction: self.contact.skin,
+            friction: Friction::new(&self.contact.friction, &self.wall_friction()),
+            gravity: DVec2::new(self.gravity.0, self.gravity.1),
         }
     }
 }

@@ -1,0 +1,142 @@
+//! The benchmarks of the frictional soft-particle paper (seed 002 §5; SPEC §11, §13; issue #15)
+//! on the shipped scenarios. Heavy enough to be `--ignored`:
+//!
+//! ```text
+//! cargo test --release --test friction_benchmarks -- --ignored --nocapture
+//! ```
+//!
+//! prints `rolling_s_sdem = ...` (mu 0.6, full level), `rolling_s_sdem_slip = ...` (mu 0.1),
+//! and `compaction30_phi_gain_with_friction = ...` (phi(mu 0.5) - phi(mu 0) at the final
+//! strain, SDEM), each on its own line, with the tables behind them.
+
+mod common;
+
+use sdem::run::{RunOptions, build_world, run_scenario};
+use sdem::scenario::Scenario;
+use std::path::{Path, PathBuf};
+
+fn scenarios() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios")
+}
+
+/// A shipped scenario with its text edited by `edit`, loaded from the scenarios folder (its
+/// sample file is read from there).
+fn shipped(name: &str, edit: impl Fn(String) -> String) -> Scenario {
+    let path = scenarios().join(name);
+    let text = edit(std::fs::read_to_string(&path).unwrap());
+    let mut s = Scenario::parse(&text, &path.display().to_string()).unwrap();
+    s.load_sample(&scenarios()).unwrap();
+    s.validate().unwrap();
+    s
+}
+
+/// Rolls the disc of `rolling_disc.ron` at model `model` with coefficient `mu` (plane and
+/// grains) and returns s = (x - x0)/(g t^2 sin theta), x measured down the plane, fitted by
+/// least squares over the run (`d = s g sin(theta) t^2`).
+fn rolling_s(model: &str, mu: f64) -> f64 {
+    let scenario = shipped("rolling_disc.ron", |t| {
+        t.replace("model: Full,", &format!("model: {model},"))
+            .replace("friction: 0.6)", &format!("friction: {mu})"))
+            .replace("grains: 0.6", &format!("grains: {mu}"))
+    });
+    let mut world = build_world(&scenario).unwrap();
+    let theta = std::f64::consts::FRAC_PI_4;
+    let downhill = glam::DVec2::new(1.0, -1.0).normalize();
+    let g = 10.0;
+    let start = world.grains[0].center;
+    let (mut moment, mut norm) = (0.0, 0.0);
+    let end = 0.02;
+    while world.time < end {
+        world.step().unwrap();
+        if world.step % 100 == 0 {
+            let t = world.time;
+            let d = (world.grains[0].center - start).dot(downhill);
+            moment += d * t * t;
+            norm += t.powi(4);
+        }
+    }
+    moment / (norm * g * theta.sin())
+}
+
+#[test]
+#[ignore = "benchmark: runs the rolling disc at four model levels and three coefficients"]
+fn rolling_disc_sdem() {
+    // Expectations (rigid disc on a 45° incline): rolls without slip for mu >= tan(theta)/3,
+    // s = 1/3; slips for mu = 0.1, s = (1 - mu/tan theta)/2 = 0.45; slides for mu = 0, s = 1/2.
+    // The grain is ~1e-7 as soft as its load would need to deform visibly (rho g R / E = 5e-7):
+    // every level must give the rigid values.
+    println!("level       mu    s       expected");
+    let mut full = [0.0; 2];
+    for model in ["Rigid", "Volumetric", "Full", "Adaptive()"] {
+        for (k, (mu, expected)) in [(0.6, 1.0 / 3.0), (0.1, 0.45), (0.0, 0.5)]
+            .into_iter()
+            .enumerate()
+        {
+            let s = rolling_s(model, mu);
+            println!("{model:<11} {mu:<5} {s:.5} {expected:.5}");
+            assert!(
+                (s - expected).abs() < 2e-3 * expected,
+                "{model}, mu = {mu}: s = {s}, expected {expected}"
+            );
+            if model == "Full" && k < 2 {
+                full[k] = s;
+            }
+        }
+    }
+    println!("rolling_s_sdem = {}", full[0]);
+    println!("rolling_s_sdem_slip = {}", full[1]);
+}
+
+/// The last row of a run's macro.csv, by column name.
+fn last_row(dir: &Path) -> impl Fn(&str) -> f64 {
+    let text = std::fs::read_to_string(dir.join("macro.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let last: Vec<String> = text.lines().last().unwrap().split(',').map(String::from).collect();
+    move |name| {
+        let k = header.iter().position(|h| h == name).unwrap();
+        last[k].parse().unwrap()
+    }
+}
+
+#[test]
+#[ignore = "benchmark: two 30-grain compactions to 40% vertical strain"]
+fn compaction30_sdem() {
+    // Expectation: both runs start from the same packing and reach the same box (40% vertical
+    // strain); friction resists the rearrangements, so the frictional packing carries a higher
+    // axial stress there. phi = V_s / V at the same box compares the grains' volumes.
+    let mut rows = Vec::new();
+    for name in ["compaction30_mu0.ron", "compaction30_mu05.ron"] {
+        let scenario = shipped(name, |t| t);
+        let dir = common::temp_dir("friction-bench", name);
+        run_scenario(
+            &scenario,
+            &RunOptions {
+                out_dir: dir.clone(),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let row = last_row(&dir);
+        let (phi, syy, height) = (row("phi"), row("syy_c"), row("box_height"));
+        println!("{name}: phi = {phi:.5}, syy_c = {syy:.4e} Pa, box height = {height:.6e} m");
+        rows.push((phi, syy, height));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+    let (frictionless, frictional) = (rows[0], rows[1]);
+    // The phase ends on the first step past the strain: the boxes differ by a step's travel.
+    assert!(
+        (frictionless.2 - frictional.2).abs() < 1e-5 * frictionless.2,
+        "the same final box: {} against {}",
+        frictionless.2,
+        frictional.2
+    );
+    assert!(
+        frictional.1 > frictionless.1,
+        "friction raises the axial stress at the same strain"
+    );
+    println!(
+        "compaction30_phi_gain_with_friction = {}",
+        frictional.0 - frictionless.0
+    );
+}
