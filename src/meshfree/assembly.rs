@@ -176,6 +176,9 @@ pub struct Evaluation {
     /// Each grain's tangent blocks (internal, inertia, damping) on its pattern, when the
     /// evaluation was asked for the tangent (empty otherwise).
     pub grain_blocks: Vec<Vec<[f64; 4]>>,
+    /// Energy dissipated by friction over the step that ended at this evaluation, all its
+    /// sub-steps together (set by [`Assembly::step`]; 0 for a bare evaluation).
+    pub dissipation: f64,
 }
 
 impl Evaluation {
@@ -215,8 +218,9 @@ impl Evaluation {
             .collect()
     }
 
-    /// Rate of frictional dissipation over the step: `sum t A_s |slip|` over slipping
-    /// elements (an energy: the work of the friction forces on the step's slips).
+    /// Energy dissipated by friction over the slips of this evaluation: `sum |t| A_s |slip|`
+    /// over slipping elements (`|t| = mu p_N`: the work of the friction forces on the slips
+    /// since the slip origin).
     pub fn friction_dissipation(&self) -> f64 {
         self.elements
             .iter()
@@ -886,6 +890,7 @@ impl Assembly {
             elastic_energy,
             force_scale,
             grain_blocks,
+            dissipation: 0.0,
         })
     }
 
@@ -1148,6 +1153,7 @@ impl Assembly {
         )?;
         stats += s;
         let v1 = terms.velocity(&u1);
+        let mut dissipation = eval.friction_dissipation();
         let (u, v, a) = match scheme {
             TimeScheme::Trapezoidal | TimeScheme::CentralDifference => {
                 let a = terms.acceleration(&u1);
@@ -1166,6 +1172,7 @@ impl Assembly {
                     Some(&terms),
                 )?;
                 eval = e;
+                dissipation += eval.friction_dissipation();
                 stats += s;
                 let (v, a) = (terms.velocity(&u2), terms.acceleration(&u2));
                 (u2, v, a)
@@ -1177,6 +1184,7 @@ impl Assembly {
         state.multipliers = multipliers;
         state.friction = tractions;
         state.time += dt;
+        eval.dissipation = dissipation;
         Ok((eval, stats))
     }
 
@@ -1223,8 +1231,10 @@ impl Assembly {
                 if fraction * 0.5 >= self.min_sub_step =>
             {
                 self.walls = walls0;
-                let (_, mut first) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
-                let (eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                let (first_eval, mut first) =
+                    self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                let (mut eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                eval.dissipation += first_eval.dissipation;
                 first.solve += second.solve;
                 first.sub_steps += second.sub_steps;
                 Ok((eval, first))

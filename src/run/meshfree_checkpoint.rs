@@ -107,7 +107,7 @@ pub struct StateBits {
     pub multipliers: Vec<(KeyBits, Bits)>,
     /// The friction history (tangential tractions), in key order; absent in frictionless
     /// runs' checkpoints written before friction.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub friction: Vec<(KeyBits, Bits)>,
 }
 
@@ -169,7 +169,7 @@ pub struct ElementBits {
     pub dofs: Vec<u64>,
     pub force: Vec<Bits>,
     /// Friction (traction, slip, sticking) of a frictional element.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub friction: Option<(Bits, Bits, bool)>,
 }
 
@@ -180,6 +180,9 @@ pub struct EvaluationBits {
     pub elements: Vec<ElementBits>,
     pub elastic_energy: Bits,
     pub force_scale: Bits,
+    /// Energy friction dissipated over the step (absent before friction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dissipation: Option<Bits>,
 }
 
 impl From<&Evaluation> for EvaluationBits {
@@ -205,6 +208,7 @@ impl From<&Evaluation> for EvaluationBits {
                 .collect(),
             elastic_energy: e.elastic_energy.into(),
             force_scale: e.force_scale.into(),
+            dissipation: (e.dissipation != 0.0).then(|| e.dissipation.into()),
         }
     }
 }
@@ -250,6 +254,7 @@ impl EvaluationBits {
             elastic_energy: self.elastic_energy.into(),
             force_scale: self.force_scale.into(),
             grain_blocks: Vec::new(),
+            dissipation: self.dissipation.map_or(0.0, f64::from),
         })
     }
 }

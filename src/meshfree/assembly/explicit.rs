@@ -181,7 +181,8 @@ impl Assembly {
     }
 
     /// `sub_steps` central-difference steps of `h` from `state` (walls moved from `walls0` at
-    /// their velocities); returns the deepest penetration met.
+    /// their velocities); returns the deepest penetration met and the energy friction
+    /// dissipated.
     fn central_differences(
         &mut self,
         state: &mut AssemblyState,
@@ -189,13 +190,13 @@ impl Assembly {
         walls0: &[crate::boundary::walls::Wall],
         h: f64,
         sub_steps: usize,
-    ) -> Result<f64, MeshfreeError> {
+    ) -> Result<(f64, f64), MeshfreeError> {
         let alpha = self.rayleigh.0;
         let mut fixed = vec![false; self.dofs()];
         for &i in &self.fixed {
             fixed[i] = true;
         }
-        let mut max_penetration = 0.0f64;
+        let (mut max_penetration, mut dissipation) = (0.0f64, 0.0);
         let (keep, gain) = (1.0 - 0.5 * alpha * h, 1.0 / (1.0 + 0.5 * alpha * h));
         // At the start of a run `state.v` is the velocity at t = 0, not at -h/2: the first
         // sub-step takes a half step from it (second-order start, exact in free fall).
@@ -206,6 +207,7 @@ impl Assembly {
             finite_residual_norm(&eval.residual)?;
             if self.friction.any() {
                 state.friction = eval.tractions();
+                dissipation += eval.friction_dissipation();
             }
             max_penetration = max_penetration.max(eval.max_penetration());
             // One DoF reads seven arrays: an index reads better than a seven-way zip.
@@ -229,7 +231,7 @@ impl Assembly {
             }
             start_up = false;
         }
-        Ok(max_penetration)
+        Ok((max_penetration, dissipation))
     }
 
     /// Advances `state` by `dt` in explicit sub-steps of at most
@@ -250,10 +252,11 @@ impl Assembly {
         let advanced =
             self.central_differences(state, &data, &walls0, dt / sub_steps as f64, sub_steps);
         self.explicit = Some(data);
-        let max_penetration = advanced?;
+        let (max_penetration, dissipation) = advanced?;
         self.move_walls(&walls0, dt);
         // The tractions of the next sub-step (not committed: that sub-step commits them).
-        let eval = self.explicit_evaluation(state, dt / sub_steps as f64)?;
+        let mut eval = self.explicit_evaluation(state, dt / sub_steps as f64)?;
+        eval.dissipation = dissipation;
         finite_residual_norm(&eval.residual)?;
         let max_penetration = max_penetration.max(eval.max_penetration());
         state.time += dt;
