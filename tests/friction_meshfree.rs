@@ -141,7 +141,6 @@ fn fit_s(samples: &[(f64, f64)], from: f64) -> f64 {
     sxy / sxx / (GRAVITY * THETA.sin())
 }
 
-
 /// A coarse disc (24 contour nodes) for 10 ms (100 steps of 0.1 ms): the fit from 2 ms.
 fn coarse_s(mu: f64) -> (f64, Roll) {
     let mut a = incline(24, mu);
@@ -246,7 +245,10 @@ fn block_sticks_below_the_cone_and_slides_above_it() {
     let mut a = block(side, 0.3 * GRAVITY, 0.5);
     let stuck = roll(&mut a, dt, steps, [1.0, 0.0]);
     let moved = stuck.samples.iter().map(|p| p.1.abs()).fold(0.0, f64::max);
-    println!("gx 0.3 g, mu 0.5: largest displacement {moved:.3e} m, dissipated {:.3e}", stuck.dissipated);
+    println!(
+        "gx 0.3 g, mu 0.5: largest displacement {moved:.3e} m, dissipated {:.3e}",
+        stuck.dissipated
+    );
     assert!(moved < 1e-4 * side, "the block moved by {moved:e}");
 
     let mut a = block(side, 0.3 * GRAVITY, 0.2);
@@ -262,7 +264,10 @@ fn block_sticks_below_the_cone_and_slides_above_it() {
         0.1 * GRAVITY,
         slid.dissipated
     );
-    assert!((acceleration / (0.1 * GRAVITY) - 1.0).abs() < 5e-3, "a = {acceleration}");
+    assert!(
+        (acceleration / (0.1 * GRAVITY) - 1.0).abs() < 5e-3,
+        "a = {acceleration}"
+    );
     assert!((slid.dissipated / expected_work - 1.0).abs() < 5e-3);
     assert!((slid.dissipated / balance - 1.0).abs() < 5e-3);
 }
@@ -289,7 +294,10 @@ fn explicit_block_sticks_and_slides() {
         "explicit, gx 0.3 g, mu 0.2: a = {acceleration:.5} (expected 1), dissipated {:.5e}, mu m g d = {expected_work:.5e}",
         slid.dissipated
     );
-    assert!((acceleration / (0.1 * GRAVITY) - 1.0).abs() < 0.03, "a = {acceleration}");
+    assert!(
+        (acceleration / (0.1 * GRAVITY) - 1.0).abs() < 0.03,
+        "a = {acceleration}"
+    );
     assert!((slid.dissipated / expected_work - 1.0).abs() < 0.03);
     let mut a = block_of(young, side, 0.05 * GRAVITY, 0.5);
     a.use_explicit().unwrap();
@@ -374,14 +382,20 @@ fn rolling_meshfree_benchmark() {
     let mut last = 0.0;
     for &nb in &densities {
         let (s, touching, cpu) = scenario_s(nb, 0.6);
-        println!("boundary_nodes {nb:4}  mu 0.6  s = {s:.5}  touching {:.0}% of steps  {cpu:.1} s", 100.0 * touching);
+        println!(
+            "boundary_nodes {nb:4}  mu 0.6  s = {s:.5}  touching {:.0}% of steps  {cpu:.1} s",
+            100.0 * touching
+        );
         assert!((s - 1.0 / 3.0).abs() < 0.02, "s = {s}");
         last = s;
     }
     for mu in [0.1, 0.0] {
         let (s, touching, cpu) = scenario_s(64, mu);
         let expected = 0.5 * (1.0 - mu / THETA.tan());
-        println!("boundary_nodes   64  mu {mu}  s = {s:.5} (expected {expected:.3})  touching {:.0}% of steps  {cpu:.1} s", 100.0 * touching);
+        println!(
+            "boundary_nodes   64  mu {mu}  s = {s:.5} (expected {expected:.3})  touching {:.0}% of steps  {cpu:.1} s",
+            100.0 * touching
+        );
         assert!((s - expected).abs() < 2e-3, "s = {s}");
     }
     println!("rolling_s_meshfree = {last}");
@@ -402,7 +416,11 @@ fn rolling_is_bitwise_identical_on_one_and_two_threads() {
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             let track: Vec<f64> = r.samples.iter().map(|p| p.1).collect();
             let history: Vec<u64> = r.state.friction.values().map(|t| t.to_bits()).collect();
-            assert!(r.with_history > 10, "{} steps with friction", r.with_history);
+            assert!(
+                r.with_history > 10,
+                "{} steps with friction",
+                r.with_history
+            );
             (
                 bits(&track),
                 bits(&r.state.u),
@@ -432,7 +450,10 @@ fn a_rolling_run_resumes_bitwise_with_its_friction_history() {
     }
     let path = dir.join("checkpoint.bin");
     let c = MeshfreeCheckpoint::read(&path).unwrap();
-    assert!(!c.state.friction.is_empty(), "no friction history in the checkpoint");
+    assert!(
+        !c.state.friction.is_empty(),
+        "no friction history in the checkpoint"
+    );
     with_threads(1, || resume_run(&c, &path, &common::checkpointed(&dir, 5))).unwrap();
     for file in ["macro.csv", "grains.csv", "checkpoint.bin"] {
         let (a, b) = (
@@ -443,3 +464,51 @@ fn a_rolling_run_resumes_bitwise_with_its_friction_history() {
     }
 }
 
+/// The plane-strain force per unit length that presses a cylinder of radius `r` between two
+/// plates to an approach `2 d` (Johnson 1985, SPEC §11):
+/// `2 d = (2 F / (π E*)) (2 ln(4 R / b) - 1)`, `b = sqrt(4 F R / (π E*))`, solved for F by
+/// fixed-point iteration.
+fn johnson_force(d: f64, r: f64, e_star: f64) -> f64 {
+    let mut f = 0.1 * e_star * d;
+    for _ in 0..200 {
+        let b = (4.0 * f * r / (std::f64::consts::PI * e_star)).sqrt();
+        f = d * std::f64::consts::PI * e_star / (2.0 * (4.0 * r / b).ln() - 1.0);
+    }
+    f
+}
+
+#[test]
+#[ignore]
+fn hertz_2d_table() {
+    // A disc (nu = 0.45, neo-Hookean; E = 1, R = 0.5: F / (E R) against d / R is the same for
+    // E = 10 MPa, R = 0.5 mm) pressed quasi-statically between two frictionless rigid plates
+    // (each moves in by d), at increasing nodal density, against Johnson's cylinder law.
+    let (nu, r) = (0.45, common::meshfree::RADIUS);
+    let e_star = 1.0 / (1.0 - nu * nu);
+    let steps = 25;
+    let approach = 0.05; // 2 d at the last step: d / R = 0.05
+    let rows = [1usize, 2, 5, 10, 25];
+    let mut table = Vec::new();
+    for nb in [32, 64, 128, 256] {
+        let t0 = std::time::Instant::now();
+        let c = common::meshfree::column(1, nb, nu, approach, steps);
+        table.push((nb, c.force, t0.elapsed().as_secs_f64()));
+    }
+    print!("d/R     Johnson F/(E R)");
+    for (nb, _, _) in &table {
+        print!("  nb {nb:4} (ratio)");
+    }
+    println!();
+    for &k in &rows {
+        let d = 0.5 * approach * k as f64 / steps as f64;
+        let fj = johnson_force(d, r, e_star);
+        print!("{:.3}   {:.5e}", d / r, fj / r);
+        for (_, f, _) in &table {
+            print!("  {:.5e} ({:.3})", f[k - 1] / r, f[k - 1] / fj);
+        }
+        println!();
+    }
+    for (nb, _, cpu) in &table {
+        println!("nb {nb}: {cpu:.1} s");
+    }
+}

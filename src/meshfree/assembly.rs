@@ -722,8 +722,15 @@ impl Assembly {
                         origin: (o[0] - q[0]) * -n[1] + (o[1] - q[1]) * n[0],
                     }
                 });
-                let e =
-                    wall_node_element(&x, p, n, lambda_of(&key), k, tangential.as_ref(), with_tangent);
+                let e = wall_node_element(
+                    &x,
+                    p,
+                    n,
+                    lambda_of(&key),
+                    k,
+                    tangential.as_ref(),
+                    with_tangent,
+                );
                 if e.pressure <= 0.0 {
                     continue;
                 }
@@ -1025,7 +1032,8 @@ impl Assembly {
                 self.solver.solve_factored(&mut du)?;
             } else {
                 before_modified = None;
-                let with_tangent = self.evaluate_with(u, multipliers, friction, k, dynamic, true)?;
+                let with_tangent =
+                    self.evaluate_with(u, multipliers, friction, k, dynamic, true)?;
                 self.fill_tangent(&with_tangent, &mut tangent);
                 du = with_tangent.residual.iter().map(|v| -v).collect();
                 self.solver.solve(&tangent, &mut du)?;

@@ -16,8 +16,8 @@
 
 pub mod assembly;
 pub mod contact;
-pub mod friction;
 pub mod discretization;
+pub mod friction;
 pub mod material;
 pub mod model;
 pub mod nts;

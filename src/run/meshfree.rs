@@ -20,8 +20,8 @@ use super::simulation::{RunRecord, Simulation};
 use super::{RunError, io_error};
 use crate::boundary::loading::LoadState;
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size};
-use crate::meshfree::friction::FrictionCoefficients;
 use crate::meshfree::assembly::{Assembly, AssemblyState, Evaluation, StepStats};
+use crate::meshfree::friction::FrictionCoefficients;
 use crate::meshfree::shape::{FourierParams, StarShape, place_nodes};
 use crate::meshfree::{
     DiscNodes, GrainModel, Hyperelastic, IntegrationMesh, MeshfreeError, NodeDensity, NodeSet,

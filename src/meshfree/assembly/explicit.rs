@@ -151,7 +151,12 @@ impl Assembly {
     /// The slip origin of an explicit sub-step of `h` ending at `state.u`: the nodes at
     /// `u - h v` (`state.v`: the half-step velocity of the sub-step), the walls `h` earlier.
     fn explicit_slip_origin(&self, state: &AssemblyState, h: f64) -> SlipOrigin {
-        let before: Vec<f64> = state.u.iter().zip(&state.v).map(|(u, v)| u - h * v).collect();
+        let before: Vec<f64> = state
+            .u
+            .iter()
+            .zip(&state.v)
+            .map(|(u, v)| u - h * v)
+            .collect();
         let mut origin = self.slip_origin(&before);
         for (p, w) in origin.wall_points.iter_mut().zip(&self.walls) {
             p[0] -= h * w.velocity.x;
