@@ -178,12 +178,12 @@ pub fn wall_node_element(
                 c.d_slip * tau[1] - c.d_pressure * stiffness * n[1],
             ];
             let tr = c.traction;
-            for i in 0..2 {
+            for (i, &tau_i) in tau.iter().enumerate() {
                 for j in 0..2 {
-                    e.stiffness[2 + i][j] -= tau[i] * tr * (-0.5 * t0[j]);
+                    e.stiffness[2 + i][j] -= tau_i * tr * (-0.5 * t0[j]);
                     e.stiffness[2 + i][2 + j] -=
-                        tau[i] * (a_s * dt[j] + tr * 0.5 * (t0[j] - t1[j]));
-                    e.stiffness[2 + i][4 + j] -= tau[i] * tr * 0.5 * t1[j];
+                        tau_i * (a_s * dt[j] + tr * 0.5 * (t0[j] - t1[j]));
+                    e.stiffness[2 + i][4 + j] -= tau_i * tr * 0.5 * t1[j];
                 }
             }
         }
