@@ -550,6 +550,30 @@ fn run(cli: Cli) -> Result<()> {
                     2.0 * range
                 );
             }
+            if parsed.tangential_ratio() > 0.0 {
+                let f = &parsed.contact.friction;
+                let planes: Vec<String> = parsed
+                    .planes
+                    .iter()
+                    .map(|p| p.friction.to_string())
+                    .collect();
+                println!(
+                    "friction: mu = {} between grains, {} at the box walls{}; K_t = {} K_n, \
+                     tangential damping {}",
+                    f.grains,
+                    f.walls,
+                    if planes.is_empty() {
+                        String::new()
+                    } else {
+                        format!(", {} at the planes", planes.join(", "))
+                    },
+                    f.stiffness_ratio,
+                    f.damping
+                );
+            }
+            if parsed.gravity != (0.0, 0.0) {
+                println!("gravity: ({}, {})", parsed.gravity.0, parsed.gravity.1);
+            }
             if let Some(a) = parsed.parameters().adaptive {
                 println!(
                     "adaptive model level: time step {:.4e} while every grain is rigid (critical {:.4e})",

@@ -92,7 +92,13 @@ fn last_row(dir: &Path) -> impl Fn(&str) -> f64 {
     let text = std::fs::read_to_string(dir.join("macro.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
-    let last: Vec<String> = text.lines().last().unwrap().split(',').map(String::from).collect();
+    let last: Vec<String> = text
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(String::from)
+        .collect();
     move |name| {
         let k = header.iter().position(|h| h == name).unwrap();
         last[k].parse().unwrap()
