@@ -197,7 +197,7 @@ def samples(a, out):
             z0 = re.search(r"z_0 = ([0-9.]+)", summary)
             jam3 = next((r for r in data if float(r["z_nr3"]) > 0), None)
             curves[(sample, kind)] = [(float(r["phi"]), float(r["p_c"])) for r in data
-                                      if float(r["p_c"]) > 0 and float(r["phi"]) > 0.7]
+                                      if float(r["p_c"]) > 1e-6 and float(r["phi"]) > 0.76]
             rows.append({"sample": sample, "mu": "0.5" if kind else "0",
                          "phi0": phi0.group(1) if phi0 else "", "z0": z0.group(1) if z0 else "",
                          "phi0_3rule": jam3["phi"] if jam3 else "",
