@@ -95,6 +95,9 @@ enum Command {
         /// Contour resolution dbeta in degrees.
         #[arg(long, default_value_t = 1.0)]
         resolution: f64,
+        /// Coulomb friction coefficient of every contact (0: frictionless).
+        #[arg(long, default_value_t = 0.0)]
+        friction: f64,
     },
     /// Fit the secant contact law (a, b) to single-grain meshfree compressions (SPEC §10):
     /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg. With
@@ -395,13 +398,20 @@ fn run(cli: Cli) -> Result<()> {
             steps,
             threads,
             resolution,
+            friction,
         } => {
             if grains < 4 || steps == 0 {
                 bail!("--grains must be at least 4 and --steps at least 1");
             }
+            if !(friction.is_finite() && friction >= 0.0) {
+                bail!("--friction {friction}: a friction coefficient is a finite number >= 0");
+            }
             let pool = thread_pool(threads)?;
             let result = pool.install(|| {
                 let mut world = sdem::run::bench::dense_packing(grains, resolution);
+                if friction > 0.0 {
+                    sdem::run::bench::with_friction(&mut world, friction);
+                }
                 sdem::run::bench::run_bench(&mut world, 20, steps)
             })?;
             println!(
@@ -549,6 +559,30 @@ fn run(cli: Cli) -> Result<()> {
                     parsed.sample.box_height,
                     2.0 * range
                 );
+            }
+            if parsed.tangential_ratio() > 0.0 {
+                let f = &parsed.contact.friction;
+                let planes: Vec<String> = parsed
+                    .planes
+                    .iter()
+                    .map(|p| p.friction.to_string())
+                    .collect();
+                println!(
+                    "friction: mu = {} between grains, {} at the box walls{}; K_t = {} K_n, \
+                     tangential damping {}",
+                    f.grains,
+                    f.walls,
+                    if planes.is_empty() {
+                        String::new()
+                    } else {
+                        format!(", {} at the planes", planes.join(", "))
+                    },
+                    f.stiffness_ratio,
+                    f.damping
+                );
+            }
+            if parsed.gravity != (0.0, 0.0) {
+                println!("gravity: ({}, {})", parsed.gravity.0, parsed.gravity.1);
             }
             if let Some(a) = parsed.parameters().adaptive {
                 println!(

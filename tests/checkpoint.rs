@@ -142,6 +142,7 @@ fn f64_round_trips_bit_exactly() {
         contact_history: sdem::integration::ContactHistory {
             pairs: vec![([0, 1], -0.0), ([0, 7], 5e-324), ([3, 4], -1.5)],
             walls: vec![(2, 3, f64::MIN_POSITIVE / 3.0)],
+            dissipated: -0.0,
         },
     };
     let back = Checkpoint::from_bytes(&c.to_bytes(), "mem").unwrap();
@@ -161,7 +162,7 @@ fn f64_round_trips_bit_exactly() {
             .iter()
             .map(|(g, w, f)| (*g, *w, f.to_bits()))
             .collect();
-        (pairs, walls)
+        (pairs, walls, h.dissipated.to_bits())
     };
     assert_eq!(
         history_bits(&back.contact_history),

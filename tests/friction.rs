@@ -295,6 +295,19 @@ fn a_frictional_compaction_resumes_bitwise_and_is_the_same_on_any_thread_count()
         assert_eq!(ca.contact_history, cb.contact_history);
     };
     same(&reference, &two);
+    // macro.csv reports the sliding contacts and the energy friction dissipated (it only grows).
+    let text = std::fs::read_to_string(reference.join("macro.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| -> Vec<f64> {
+        let k = header.iter().position(|h| *h == name).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(k).unwrap().parse().unwrap())
+            .collect()
+    };
+    let work = column("friction_work");
+    assert!(work.windows(2).all(|w| w[1] >= w[0]) && *work.last().unwrap() > 0.0);
+    assert!(column("sliding_contacts").iter().any(|&n| n > 0.0));
     for stop in [3000, 5000] {
         let dir = common::temp_dir("friction", &format!("stop{stop}"));
         let (c, path) =

@@ -106,9 +106,9 @@ fn last_row(dir: &Path) -> impl Fn(&str) -> f64 {
 }
 
 #[test]
-#[ignore = "benchmark: two 30-grain compactions to 40% vertical strain"]
+#[ignore = "benchmark: two 30-grain compactions to 30% vertical strain"]
 fn compaction30_sdem() {
-    // Expectation: both runs start from the same packing and reach the same box (40% vertical
+    // Expectation: both runs start from the same packing and reach the same box (30% vertical
     // strain); friction resists the rearrangements, so the frictional packing carries a higher
     // axial stress there. phi = V_s / V at the same box compares the grains' volumes.
     let mut rows = Vec::new();

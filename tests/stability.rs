@@ -162,3 +162,42 @@ fn compressible_grains_are_stable_below_the_coupled_estimate_and_stopped_above_i
         ),
     }
 }
+
+/// [`dense_run`] with friction mu = 0.5 on every contact, at `fraction` of the frictional
+/// estimate, at model `level`.
+fn frictional_dense_run(
+    level: ModelLevel,
+    fraction: f64,
+    steps: usize,
+) -> Result<World, Instability> {
+    let mut world = dense_packing(400, 1.0);
+    world.params.level = level;
+    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
+    world.set_levels(&levels);
+    sdem::run::bench::with_friction(&mut world, 0.5);
+    world.params.dt *= fraction / 0.4;
+    for _ in 0..steps {
+        world.step()?;
+    }
+    Ok(world)
+}
+
+#[test]
+fn frictional_contacts_are_stable_below_their_critical_estimate_and_stopped_above() {
+    // Expectation (SPEC §9, §13): the estimate counts the tangential mode; below it the dense
+    // packing with friction on every contact relaxes (its contacts stick and slide), well above
+    // it the engine stops the run with a diagnostic. Measured limits: 1.15-1.2 (full),
+    // 1.4-1.6 (rigid) of the estimate.
+    for level in [ModelLevel::Rigid, ModelLevel::Full] {
+        let world = frictional_dense_run(level, 0.9, 3000)
+            .unwrap_or_else(|e| panic!("{level:?} unstable below the estimate: {e}"));
+        // Still a dense packing: z = 2C/N above 4.5 (jammed frictionless discs have z = 4).
+        let z = 2.0 * world.totals.contacts as f64 / world.grains.len() as f64;
+        assert!(z > 4.5, "{level:?}: z = {z}");
+        let err = frictional_dense_run(level, 2.5, 3000).expect_err("unstable at 2.5x");
+        assert!(
+            !matches!(err, Instability::NonFinite { .. }),
+            "caught only as NaN: {err}"
+        );
+    }
+}

@@ -169,19 +169,22 @@ struct ChunkSums {
     failure: Option<Instability>,
 }
 
-/// The tangential history of a world's contacts (SPEC §13): the spring force of each closed
-/// frictional contact, which a checkpoint must keep for a bitwise resume.
+/// The frictional state of a world (SPEC §13): the spring force of each closed frictional
+/// contact, which a checkpoint must keep for a bitwise resume, and the energy friction has
+/// dissipated.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ContactHistory {
     /// `([i, j], F_t)` of each grain pair (i < j as listed) with a history, in pair order.
     pub pairs: Vec<([u32; 2], f64)>,
     /// `(grain, wall, F_t)` of each grain–wall contact with a history, in grain order.
     pub walls: Vec<(u32, u32, f64)>,
+    /// Energy dissipated by Coulomb sliding since the run started.
+    pub dissipated: f64,
 }
 
 impl ContactHistory {
     pub fn is_empty(&self) -> bool {
-        self.pairs.is_empty() && self.walls.is_empty()
+        self.pairs.is_empty() && self.walls.is_empty() && self.dissipated.to_bits() == 0
     }
 }
 
@@ -210,6 +213,8 @@ pub struct World {
     reach: Vec<f64>,
     /// Per-step scratch of a periodic cell: the image shift each grain was wrapped by.
     wraps: Vec<[i64; 2]>,
+    /// Energy dissipated by Coulomb sliding since the run started.
+    pub friction_work: f64,
     /// The tangential spring force of each grain's contact with each wall (SPEC §13; zero when
     /// the contact is open), kept for every grain so that the grain pass can own its row.
     wall_history: Vec<[f64; MAX_WALLS]>,
@@ -245,6 +250,7 @@ impl World {
             centers: Vec::with_capacity(n),
             reach: Vec::with_capacity(n),
             wraps: Vec::new(),
+            friction_work: 0.0,
             wall_history: vec![[0.0; MAX_WALLS]; n],
         };
         world.count_levels();
@@ -313,7 +319,11 @@ impl World {
                 }
             }
         }
-        ContactHistory { pairs, walls }
+        ContactHistory {
+            pairs,
+            walls,
+            dissipated: self.friction_work,
+        }
     }
 
     /// Restores the tangential history of a checkpoint (before the first step of a resumed
@@ -354,6 +364,7 @@ impl World {
         for &(g, w, h) in &history.walls {
             self.wall_history[g as usize][w as usize] = h;
         }
+        self.friction_work = history.dissipated;
         Ok(())
     }
 
@@ -759,6 +770,9 @@ impl World {
         }
         self.time += dt;
         self.step += 1;
+        if self.params.friction.is_some() {
+            self.friction_work += totals.friction_dissipation;
+        }
         self.totals = totals;
         // The next step's time step, from the levels the grains chose (a fixed-order sum).
         self.apply_adaptive_dt();

@@ -6,8 +6,9 @@
 //! taken their contact flats). nu = 0.5, dbeta = 1°, walls at rest half a spacing away.
 
 use crate::boundary::walls::box_walls;
+use crate::contact::friction::FrictionSettings;
 use crate::grain::{Grain, Material};
-use crate::integration::parameters::critical_time_step;
+use crate::integration::parameters::{Friction, critical_time_step, frictional_critical_time_step};
 use crate::integration::{Instability, Parameters, World};
 use crate::sample::{RadiusDistribution, unit_random};
 use glam::DVec2;
@@ -64,6 +65,27 @@ pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
     params.resolution_deg = resolution_deg;
     params.dt = 0.4 * critical_time_step(&material, &params.law, 0.5 * spacing, params.level);
     World::new(params, list, box_walls(0.0, width, 0.0, height))
+}
+
+/// Makes every contact of a [`dense_packing`] frictional (grains and walls, `K_t = K_n`, no
+/// tangential damping), with the time step at the same fraction of the frictional estimate.
+pub fn with_friction(world: &mut World, mu: f64) {
+    let settings = FrictionSettings {
+        grains: mu,
+        walls: mu,
+        ..Default::default()
+    };
+    let p = &mut world.params;
+    p.friction = Friction::new(&settings, &vec![mu; world.walls.len()]);
+    let spacing = 0.024;
+    p.dt = 0.4
+        * frictional_critical_time_step(
+            &p.material,
+            &p.law,
+            0.5 * spacing,
+            p.level,
+            Friction::stiffness_ratio(&p.friction),
+        );
 }
 
 /// Runs `steps` steps after `warmup` steps and times them.

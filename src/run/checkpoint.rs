@@ -430,6 +430,8 @@ pub struct Stored {
 pub struct HistoryBits {
     pub pairs: Vec<(u32, u32, Bits)>,
     pub walls: Vec<(u32, u32, Bits)>,
+    /// The energy friction has dissipated.
+    pub dissipated: Bits,
 }
 
 impl From<&ContactHistory> for HistoryBits {
@@ -441,6 +443,7 @@ impl From<&ContactHistory> for HistoryBits {
                 .map(|&([i, j], f)| (i, j, f.into()))
                 .collect(),
             walls: h.walls.iter().map(|&(g, w, f)| (g, w, f.into())).collect(),
+            dissipated: h.dissipated.into(),
         }
     }
 }
@@ -454,6 +457,7 @@ impl From<&HistoryBits> for ContactHistory {
                 .map(|&(i, j, f)| ([i, j], f.into()))
                 .collect(),
             walls: h.walls.iter().map(|&(g, w, f)| (g, w, f.into())).collect(),
+            dissipated: h.dissipated.into(),
         }
     }
 }

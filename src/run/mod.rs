@@ -220,12 +220,10 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
     })
 }
 
-/// A new `macro.csv` for an SDEM run: the common columns, and a periodic cell's.
+/// A new `macro.csv` for an SDEM run: the common columns, and a periodic cell's and friction's
+/// (see [`sdem::extra_columns`]).
 fn sdem_macro_writer(scenario: &Scenario, path: &Path) -> std::io::Result<MacroWriter> {
-    match scenario.boundary {
-        Boundary::Walls => MacroWriter::create(path),
-        Boundary::Periodic => MacroWriter::create_with_columns(path, sdem::PERIODIC_COLUMNS),
-    }
+    MacroWriter::create_with_columns(path, &sdem::extra_columns(scenario))
 }
 
 /// Runs a scenario to the end of its loading program, writing `macro.csv`, `grains.csv` and
@@ -340,15 +338,11 @@ fn resume_sdem(
         counts[scenario.model.level().index()] = c.grains.len() as u64;
         counts
     });
-    let writer = match scenario.boundary {
-        Boundary::Walls => {
-            MacroWriter::resume_upgrading(&macro_path, c.runner.macro_rows, fixed_levels)
-        }
-        Boundary::Periodic => MacroWriter::resume_with_columns(
-            &macro_path,
-            c.runner.macro_rows,
-            sdem::PERIODIC_COLUMNS,
-        ),
+    let columns = sdem::extra_columns(scenario);
+    let writer = if columns.is_empty() {
+        MacroWriter::resume_upgrading(&macro_path, c.runner.macro_rows, fixed_levels)
+    } else {
+        MacroWriter::resume_with_columns(&macro_path, c.runner.macro_rows, &columns)
     }
     .map_err(|e| {
         RunError::Resume(format!(

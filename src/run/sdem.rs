@@ -22,6 +22,23 @@ use std::path::Path;
 /// `sxy_kin = -sigma_kin_xy`.
 pub const PERIODIC_COLUMNS: &[&str] = &["sxy_c", "shear_strain", "cell_tilt", "p_kin", "sxy_kin"];
 
+/// The `macro.csv` columns of a frictional run, after the periodic cell's if any: the contacts
+/// sliding at the Coulomb limit in the row's step (grain–grain and grain–wall), and the energy
+/// dissipated by sliding since the run started.
+pub const FRICTION_COLUMNS: &[&str] = &["sliding_contacts", "friction_work"];
+
+/// The columns of an SDEM run's `macro.csv` after the common ones.
+pub fn extra_columns(scenario: &Scenario) -> Vec<&'static str> {
+    let mut columns = Vec::new();
+    if !scenario.boundary.is_walls() {
+        columns.extend_from_slice(PERIODIC_COLUMNS);
+    }
+    if scenario.tangential_ratio() > 0.0 {
+        columns.extend_from_slice(FRICTION_COLUMNS);
+    }
+    columns
+}
+
 /// The explicit SDEM engine ([`World`]) with what a run keeps beside it: the last good grains,
 /// the constants of its measures and the adaptive-level statistics.
 pub struct Sdem {
@@ -141,6 +158,13 @@ impl Simulation for Sdem {
                 p.tilt / height,
                 -0.5 * (t.kinetic_stress[0] + t.kinetic_stress[1]),
                 -t.kinetic_stress[2]
+            );
+        }
+        if self.world.params.friction.is_some() {
+            let _ = write!(
+                row,
+                ",{},{:.9e}",
+                self.world.totals.sliding_contacts, self.world.friction_work
             );
         }
     }
