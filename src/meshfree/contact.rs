@@ -181,8 +181,7 @@ pub fn wall_node_element(
             for (i, &tau_i) in tau.iter().enumerate() {
                 for j in 0..2 {
                     e.stiffness[2 + i][j] -= tau_i * tr * (-0.5 * t0[j]);
-                    e.stiffness[2 + i][2 + j] -=
-                        tau_i * (a_s * dt[j] + tr * 0.5 * (t0[j] - t1[j]));
+                    e.stiffness[2 + i][2 + j] -= tau_i * (a_s * dt[j] + tr * 0.5 * (t0[j] - t1[j]));
                     e.stiffness[2 + i][4 + j] -= tau_i * tr * 0.5 * t1[j];
                 }
             }
