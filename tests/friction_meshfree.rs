@@ -200,24 +200,7 @@ fn block(side: f64, gx: f64, mu: f64) -> Assembly {
 
 /// [`block`] of Young's modulus `young`.
 fn block_of(young: f64, side: f64, gx: f64, mu: f64) -> Assembly {
-    let h = 0.5 * side;
-    let shape = StarShape::Polygon {
-        vertices: vec![[-h, -h], [h, -h], [h, h], [-h, h]],
-    };
-    let nodes = MeshfreeSettings {
-        boundary_nodes: 32,
-        ..MeshfreeSettings::default()
-    };
-    let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, young, POISSON, DENSITY).unwrap();
-    let grain = grain_model(
-        &SampleGrain {
-            shape,
-            centre: [0.0, h],
-        },
-        &nodes,
-        material,
-    )
-    .unwrap();
+    let grain = square(young, side, [0.0, 0.5 * side], 32);
     let walls = vec![Wall::new(DVec2::ZERO, DVec2::Y)];
     let solver = SolverSettings {
         k0: young / RADIUS,
@@ -231,6 +214,94 @@ fn block_of(young: f64, side: f64, gx: f64, mu: f64) -> Assembly {
     })
     .unwrap();
     a
+}
+
+/// A square grain of side `side` (`boundary_nodes` contour nodes, the seed's material but
+/// E = `young`) centred on `centre`.
+fn square(young: f64, side: f64, centre: [f64; 2], boundary_nodes: usize) -> GrainModel {
+    let h = 0.5 * side;
+    let shape = StarShape::Polygon {
+        vertices: vec![[-h, -h], [h, -h], [h, h], [-h, h]],
+    };
+    let nodes = MeshfreeSettings {
+        boundary_nodes,
+        ..MeshfreeSettings::default()
+    };
+    let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, young, POISSON, DENSITY).unwrap();
+    grain_model(&SampleGrain { shape, centre }, &nodes, material).unwrap()
+}
+
+/// A block of side 0.6 mm (grain 0) on a block of side 1 mm (grain 1) on the floor, gravity
+/// `(gx, -GRAVITY)`; grain–grain friction `mu`, the floor's 0.6.
+///
+/// The master splines round a polygon's corners (Catmull–Rom: the tangent at a corner node
+/// points between its two faces), so the spline of a face's last segment dips below the face
+/// by a fraction of the spacing: the upper block (48 nodes, spacing 0.05 mm, corners at
+/// ±0.3 mm) is laid so that no node of the lower face (spacing 0.125 mm) falls on those
+/// segments, which would start the run overlapping.
+fn stacked_blocks(gx: f64, mu: f64) -> Assembly {
+    let (lower, upper) = (2.0 * RADIUS, 1.2 * RADIUS);
+    let grains = vec![
+        square(YOUNG, upper, [0.0, lower + 0.5 * upper], 48),
+        square(YOUNG, lower, [0.0, 0.5 * lower], 32),
+    ];
+    let walls = vec![Wall::new(DVec2::ZERO, DVec2::Y)];
+    let mut a = Assembly::new(grains, walls, [gx, -GRAVITY], (0.0, 0.0), settings()).unwrap();
+    a.set_friction(FrictionCoefficients {
+        grains: mu,
+        walls: vec![0.6],
+        stiffness_ratio: 1.0,
+    })
+    .unwrap();
+    a
+}
+
+#[test]
+#[ignore]
+fn block_on_block_sticks_and_slides() {
+    // Grain–grain friction (node-to-segment element) between a block of 0.6 mm and one of
+    // 1 mm on the floor (mu 0.6), pushed by gx = 0.3 g. Coulomb expects: with mu = 0.5 the
+    // upper block sticks, with mu = 0.2 it slides at 0.1 g and friction dissipates mu m g d,
+    // the lower block held by the floor. Measured (release, 40 steps of 0.1 ms): the stuck
+    // block creeps 1.4e-6 m (6% of the 2.4e-5 m it slides frictionless), the sliding one
+    // accelerates at 0.920 of 0.1 g and dissipates 1.056 mu m g d, the lower block moves
+    // 6.6e-8 m. Why not better: a master spline is Catmull–Rom, so at a polygon's corner it
+    // dips below the face by a fraction of the node spacing; the lower face's nodes that pass
+    // under the upper block's corners meet that dip (a geometric bump, present without
+    // friction), and the undamped upper block rocks, its contacts opening and closing. The
+    // bounds below are those of the measurement (friction acts, Coulomb's order), not of
+    // Coulomb's law; the element itself is checked exactly by finite differences (nts.rs).
+    let (dt, steps) = (1e-4, 40);
+    let free = 0.5 * 0.3 * GRAVITY * (dt * steps as f64).powi(2);
+    let mut a = stacked_blocks(0.3 * GRAVITY, 0.5);
+    let stuck = roll(&mut a, dt, steps, [1.0, 0.0]);
+    let moved = stuck.samples.iter().map(|p| p.1.abs()).fold(0.0, f64::max);
+    println!(
+        "block on block, mu 0.5: largest displacement {moved:.3e} m ({:.3} of the free slide)",
+        moved / free
+    );
+    let mut a = stacked_blocks(0.3 * GRAVITY, 0.2);
+    let slid = roll(&mut a, dt, steps, [1.0, 0.0]);
+    let acceleration = 2.0 * fit_s(&slid.samples, 1e-3) * GRAVITY * THETA.sin();
+    let (_, distance) = *slid.samples.last().unwrap();
+    let mass = DENSITY * (1.2 * RADIUS).powi(2);
+    let expected_work = 0.2 * mass * GRAVITY * distance;
+    let (_, lower) = a.grains[1].contour_area_centroid(a.grain_slice(&slid.state.u, 1));
+    println!(
+        "block on block, mu 0.2: a = {acceleration:.5} (expected 1), dissipated {:.5e}, mu m g d = {expected_work:.5e}, lower block at x = {:.3e}",
+        slid.dissipated, lower[0]
+    );
+    assert!(moved < 0.1 * free, "the upper block moved by {moved:e}");
+    assert!(
+        (acceleration / (0.1 * GRAVITY) - 1.0).abs() < 0.1,
+        "a = {acceleration}"
+    );
+    assert!((slid.dissipated / expected_work - 1.0).abs() < 0.1);
+    assert!(
+        lower[0].abs() < 1e-3 * distance,
+        "the lower block moved by {:e}",
+        lower[0]
+    );
 }
 
 #[test]
@@ -324,13 +395,6 @@ fn bad_friction_is_refused() {
                 ..FrictionCoefficients::default()
             },
             "stiffness_ratio",
-        ),
-        (
-            FrictionCoefficients {
-                grains: 0.5,
-                ..FrictionCoefficients::default()
-            },
-            "grain-grain",
         ),
     ] {
         let e = a.set_friction(f).unwrap_err().to_string();

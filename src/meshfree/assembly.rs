@@ -556,19 +556,11 @@ impl Assembly {
     }
 
     /// Sets the Coulomb coefficients of the contacts (refused: a negative or non-finite mu, a
-    /// stiffness ratio outside (0, 10], grain–grain friction, which the node-to-segment
-    /// element does not have yet).
+    /// stiffness ratio outside (0, 10]).
     pub fn set_friction(&mut self, friction: FrictionCoefficients) -> Result<(), MeshfreeError> {
         friction
             .validate()
             .map_err(|e| MeshfreeError::BadInput(format!("friction: {e}")))?;
-        if friction.grains > 0.0 {
-            return Err(MeshfreeError::BadInput(
-                "friction: grain-grain friction (grains > 0) is not implemented in the \
-                 meshfree solver; only walls can have friction"
-                    .into(),
-            ));
-        }
         self.friction = friction;
         Ok(())
     }
@@ -645,6 +637,7 @@ impl Assembly {
         let off_i = self.offsets[i];
         let lambda_of = |key: &ContactKey| multipliers.get(key).copied().unwrap_or(0.0);
         let d = self.near_distance;
+        let grain_friction = friction.filter(|_| self.friction.grains > 0.0);
         for &j in masters {
             let j = j as usize;
             let master = &contours[j];
@@ -684,13 +677,30 @@ impl Assembly {
                     master[master_nodes[2]],
                     master[master_nodes[3]],
                 ];
-                let Some(e) = nts::evaluate(&x, lambda_of(&key), k, with_tangent) else {
+                let tangential = grain_friction.and_then(|fr| {
+                    let origin =
+                        slip_origin_xi(&fr.origin.contours[j], fr.origin.contours[i][s], first)?;
+                    Some(TangentialInput {
+                        mu: self.friction.grains,
+                        penalty: self.friction.stiffness_ratio * k,
+                        lambda: fr.tractions.get(&key).copied().unwrap_or(0.0),
+                        origin,
+                    })
+                });
+                let Some(e) = nts::evaluate_frictional(
+                    &x,
+                    lambda_of(&key),
+                    k,
+                    tangential.as_ref(),
+                    with_tangent,
+                    0.0,
+                ) else {
                     continue;
                 };
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                out.push(ContactElement::new(
+                let mut element = ContactElement::new(
                     key,
                     [e.gap, e.pressure, e.tributary],
                     e.normal,
@@ -698,7 +708,15 @@ impl Assembly {
                     &[(off_i, &slave_nodes), (off_j, &master_nodes)],
                     &e.force,
                     with_tangent.then_some(&e.stiffness),
-                ));
+                );
+                if tangential.is_some() {
+                    element.friction = Some(ElementFriction {
+                        traction: e.traction,
+                        slip: e.slip,
+                        sticking: e.sticking,
+                    });
+                }
+                out.push(element);
             }
         }
         for (w, wall) in self.walls.iter().enumerate() {
@@ -1319,6 +1337,25 @@ impl Assembly {
             e += 0.5 * vg.iter().zip(&mv).map(|(a, b)| a * b).sum::<f64>();
         }
         e
+    }
+}
+
+/// The slip origin of a node-to-segment element on master segment `first` (see
+/// [`nts`]'s friction): where the slave node (at `slave` then) projected on the master's
+/// contour `master` at the last converged state, as a parameter of segment `first`
+/// (`ξ' - 2 j` for a projection at `ξ'` on the segment `j` segments back). `None` when the
+/// projection fails (the element then has no friction in this evaluation).
+fn slip_origin_xi(master: &[[f64; 2]], slave: [f64; 2], first: usize) -> Option<f64> {
+    let mb = master.len();
+    let closest =
+        (0..mb).min_by(|&a, &b| dist2(master[a], slave).total_cmp(&dist2(master[b], slave)))?;
+    let (then, xi) = nts::master_segment(master, closest, slave)?;
+    // Segments from `then` to `first` along the contour, in (-mb/2, mb/2].
+    let j = (first + mb - then) % mb;
+    if 2 * j > mb {
+        Some(xi + 2.0 * (mb - j) as f64)
+    } else {
+        Some(xi - 2.0 * j as f64)
     }
 }
 

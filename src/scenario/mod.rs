@@ -835,14 +835,6 @@ impl Scenario {
             return Ok(());
         };
         let friction = &self.contact.friction;
-        if friction.grains != 0.0 {
-            return Err(invalid(
-                "contact.friction.grains",
-                num(friction.grains),
-                "0 for model: Meshfree (its grain-grain contacts have no friction yet; walls \
-                 and planes can)",
-            ));
-        }
         if friction.damping != 0.0 {
             return Err(invalid(
                 "contact.friction.damping",
