@@ -346,6 +346,18 @@ fn bad_friction_input_is_refused_with_a_clear_message() {
         "planes[0].friction",
         ">= 0",
     );
+    // A plane across the box with grains behind it: refused before the first step.
+    let text = common::SMALL_COMPACTION.replace(
+        "output: (every: 50),",
+        "output: (every: 50),\nplanes: [(point: (0.2, 0.2), normal: (1.0, 1.0), friction: 0.5)],",
+    );
+    let scenario = Scenario::parse(&text, "plane.ron").unwrap();
+    scenario.validate().unwrap();
+    let e = sdem::run::build_world(&scenario).unwrap_err().to_string();
+    assert!(
+        e.contains("beyond planes[0]") && e.contains("far side"),
+        "{e}"
+    );
 }
 
 /// 200 grains in a periodic cell, compacted, then sheared past a remap of the cell, with
