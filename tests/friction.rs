@@ -29,6 +29,7 @@ fn frictional_params(level: ModelLevel, poisson: f64, mu: f64, damping: f64) -> 
         walls: mu,
         stiffness_ratio: 1.0,
         damping,
+        ..Default::default()
     };
     p.friction = Friction::new(&settings, &[mu]);
     p.dt = 0.4 * frictional_critical_time_step(&p.material, &p.law, RADIUS, level, 1.0);
@@ -186,6 +187,7 @@ fn spinning_pair(angle: f64) -> World {
             walls: 0.0,
             stiffness_ratio: 1.0,
             damping: 0.2,
+            ..Default::default()
         },
         &[0.3, 0.5],
     );
@@ -337,6 +339,11 @@ fn bad_friction_input_is_refused_with_a_clear_message() {
         "(0, 10]",
     );
     refused(
+        "contact: (friction: (each_wall: (0.5, 0.5, -0.1, 0.5))),",
+        "contact.friction.each_wall",
+        ">= 0",
+    );
+    refused(
         "planes: [(point: (0.0, 0.0), normal: (0.0, 0.0), friction: 0.5)],",
         "planes[0].normal",
         "non-zero length",
@@ -458,4 +465,35 @@ fn a_frictional_periodic_shear_resumes_bitwise_across_a_remap_and_resists_more()
     for d in [reference, two, frictionless] {
         std::fs::remove_dir_all(&d).ok();
     }
+}
+
+#[test]
+fn every_wall_gets_its_own_coefficient() {
+    // The box walls' coefficients (one for all, or one each), then each plane's, in the order
+    // of the run's walls.
+    let parse = |extra: &str| {
+        let text = common::SMALL_COMPACTION.replace(
+            "output: (every: 50),",
+            &format!("output: (every: 50),\n{extra}"),
+        );
+        let s = Scenario::parse(&text, "walls.ron").unwrap();
+        s.validate().unwrap();
+        s
+    };
+    let s = parse(
+        "contact: (friction: (walls: 0.3)), planes: [(point: (0.0, 0.0), normal: (1.0, 1.0), friction: 0.6)],",
+    );
+    assert_eq!(s.wall_friction(), vec![0.3, 0.3, 0.3, 0.3, 0.6]);
+    let s = parse("contact: (friction: (walls: 0.3, each_wall: (0.1, 0.2, 0.0, 0.4))),");
+    assert_eq!(s.wall_friction(), vec![0.1, 0.2, 0.0, 0.4]);
+    assert!(s.tangential_ratio() > 0.0);
+    let walls = s.parameters().friction.expect("frictional walls").walls;
+    assert_eq!(&walls[..4], &[0.1, 0.2, 0.0, 0.4]);
+    // Frictionless everywhere: no friction at all, and the frictionless time step.
+    let s = parse("contact: (friction: (each_wall: (0.0, 0.0, 0.0, 0.0))),");
+    assert!(s.parameters().friction.is_none());
+    assert_eq!(
+        s.critical_time_step(),
+        common::small_compaction().critical_time_step()
+    );
 }
