@@ -567,11 +567,15 @@ fn run(cli: Cli) -> Result<()> {
                     .iter()
                     .map(|p| p.friction.to_string())
                     .collect();
+                let walls = if parsed.boundary.is_walls() {
+                    format!(", {} at the box walls", f.walls)
+                } else {
+                    String::new()
+                };
                 println!(
-                    "friction: mu = {} between grains, {} at the box walls{}; K_t = {} K_n, \
+                    "friction: mu = {} between grains{walls}{}; K_t = {} K_n, \
                      tangential damping {}",
                     f.grains,
-                    f.walls,
                     if planes.is_empty() {
                         String::new()
                     } else {

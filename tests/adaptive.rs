@@ -32,6 +32,7 @@ fn adaptive_params(poisson: f64, radius: f64, settings: AdaptiveSettings) -> Par
         &p.material,
         &p.law,
         radius,
+        0.0,
     ));
     p
 }
@@ -309,6 +310,7 @@ fn rigid_step_is_stable_on_a_dense_packing_of_rigid_grains() {
             &p.material,
             &p.law,
             0.5 * 0.024,
+            0.0,
         ));
         let mut world = World::new(p, dense.grains.clone(), dense.walls.clone());
         for _ in 0..3000 {

@@ -29,6 +29,7 @@ fn frictional_params(level: ModelLevel, poisson: f64, mu: f64, damping: f64) -> 
         walls: mu,
         stiffness_ratio: 1.0,
         damping,
+        ..Default::default()
     };
     p.friction = Friction::new(&settings, &[mu]);
     p.dt = 0.4 * frictional_critical_time_step(&p.material, &p.law, RADIUS, level, 1.0);
@@ -186,6 +187,7 @@ fn spinning_pair(angle: f64) -> World {
             walls: 0.0,
             stiffness_ratio: 1.0,
             damping: 0.2,
+            ..Default::default()
         },
         &[0.3, 0.5],
     );
@@ -265,7 +267,6 @@ fn frictional_compaction() -> Scenario {
 fn a_frictional_compaction_resumes_bitwise_and_is_the_same_on_any_thread_count() {
     // Expectation (determinism): with tangential history in the checkpoint, a resumed run
     // gives the uninterrupted run's files and grains bit for bit; so does a run on 2 threads.
-    use sdem::run::checkpoint::Checkpoint;
     use sdem::run::{resume_run, run_scenario};
     let scenario = frictional_compaction();
     let reference = common::temp_dir("friction", "ref");
@@ -279,19 +280,7 @@ fn a_frictional_compaction_resumes_bitwise_and_is_the_same_on_any_thread_count()
     })
     .unwrap();
     let same = |a: &std::path::Path, b: &std::path::Path| {
-        for file in ["macro.csv", "grains.csv"] {
-            let x = std::fs::read(a.join(file)).unwrap();
-            let y = std::fs::read(b.join(file)).unwrap();
-            assert!(x == y, "{file} differs between {a:?} and {b:?}");
-        }
-        let (ca, cb) = (
-            Checkpoint::read(&a.join("checkpoint.bin")).unwrap(),
-            Checkpoint::read(&b.join("checkpoint.bin")).unwrap(),
-        );
-        assert_eq!(
-            common::grain_bits(&ca.grains),
-            common::grain_bits(&cb.grains)
-        );
+        let (ca, cb) = common::assert_same_run(a, b);
         assert_eq!(ca.contact_history, cb.contact_history);
     };
     same(&reference, &two);
@@ -350,6 +339,11 @@ fn bad_friction_input_is_refused_with_a_clear_message() {
         "(0, 10]",
     );
     refused(
+        "contact: (friction: (each_wall: (0.5, 0.5, -0.1, 0.5))),",
+        "contact.friction.each_wall",
+        ">= 0",
+    );
+    refused(
         "planes: [(point: (0.0, 0.0), normal: (0.0, 0.0), friction: 0.5)],",
         "planes[0].normal",
         "non-zero length",
@@ -358,5 +352,148 @@ fn bad_friction_input_is_refused_with_a_clear_message() {
         "planes: [(point: (0.0, 0.0), normal: (0.0, 1.0), friction: -1.0)],",
         "planes[0].friction",
         ">= 0",
+    );
+    // A plane across the box with grains behind it: refused before the first step.
+    let text = common::SMALL_COMPACTION.replace(
+        "output: (every: 50),",
+        "output: (every: 50),\nplanes: [(point: (0.2, 0.2), normal: (1.0, 1.0), friction: 0.5)],",
+    );
+    let scenario = Scenario::parse(&text, "plane.ron").unwrap();
+    scenario.validate().unwrap();
+    let e = sdem::run::build_world(&scenario).unwrap_err().to_string();
+    assert!(
+        e.contains("beyond planes[0]") && e.contains("far side"),
+        "{e}"
+    );
+}
+
+/// 200 grains in a periodic cell, compacted, then sheared past a remap of the cell, with
+/// friction `mu` between the grains.
+fn frictional_shear(mu: f64) -> Scenario {
+    let text = format!(
+        r#"
+Scenario(
+    name: "frictional_shear",
+    sample: (count: 200, box_width: 0.45, box_height: 0.45,
+             radii: Gaussian(mean: 0.012, std_dev: 0.0024, min: 0.008, max: 0.016)),
+    material: (young: 1.0, poisson: 0.5, density: 1.0),
+    contact: (friction: (grains: {mu})),
+    boundary: Periodic,
+    loading: [
+        Isotropic(rate: Constant(5e-2), until: PackingFraction(0.85)),
+        Shear(rate: 5e-2, syy: 2e-3, gain: 0.5, max_rate: 5e-2, until: ShearStrain(0.6)),
+    ],
+    output: (every: 100),
+)
+"#
+    );
+    let s = Scenario::parse(&text, "frictional_shear.ron").unwrap();
+    s.validate().unwrap();
+    s
+}
+
+/// Mean of -sxy_c / p_c over the last quarter of the shear phase's rows.
+fn late_stress_ratio(dir: &std::path::Path) -> f64 {
+    let text = std::fs::read_to_string(dir.join("macro.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (phase, sxy, p) = (col("phase"), col("sxy_c"), col("p_c"));
+    let rows: Vec<Vec<&str>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| r[phase] == "shear")
+        .collect();
+    let late = &rows[rows.len() * 3 / 4..];
+    late.iter()
+        .map(|r| -r[sxy].parse::<f64>().unwrap() / r[p].parse::<f64>().unwrap())
+        .sum::<f64>()
+        / late.len() as f64
+}
+
+#[test]
+fn a_frictional_periodic_shear_resumes_bitwise_across_a_remap_and_resists_more() {
+    // Expectations: with histories carried through wraps and the cell's remap, a resumed
+    // sheared run is bitwise the uninterrupted one; grain friction raises the shear stress the
+    // sample carries at the same normal stress.
+    use sdem::run::checkpoint::Checkpoint;
+    use sdem::run::{resume_run, run_scenario};
+    let scenario = frictional_shear(0.5);
+    let reference = common::temp_dir("friction", "shear-ref");
+    let summary = common::with_threads(1, || {
+        run_scenario(&scenario, &common::checkpointed(&reference, 1_000_000_000))
+    })
+    .unwrap();
+    let end = Checkpoint::read(&reference.join("checkpoint.bin")).unwrap();
+    assert!(
+        end.periodic.unwrap().tilt < 0.0,
+        "the cell was remapped (its tilt went past +1/2)"
+    );
+    let same = |a: &std::path::Path, b: &std::path::Path| {
+        let (ca, cb) = common::assert_same_run(a, b);
+        assert_eq!(ca.contact_history, cb.contact_history);
+    };
+    let two = common::temp_dir("friction", "shear-two");
+    common::with_threads(2, || {
+        run_scenario(&scenario, &common::checkpointed(&two, 1_000_000_000))
+    })
+    .unwrap();
+    same(&reference, &two);
+    for stop in [summary.steps - 3000, summary.steps - 200] {
+        let dir = common::temp_dir("friction", &format!("shear-stop{stop}"));
+        let (c, path) =
+            common::run_interrupted_at(&scenario, &common::checkpointed(&dir, 777), stop);
+        assert!(!c.contact_history.pairs.is_empty());
+        resume_run(&c, &path, &common::checkpointed(&dir, 777)).unwrap();
+        same(&reference, &dir);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+    let frictionless = common::temp_dir("friction", "shear-mu0");
+    run_scenario(
+        &frictional_shear(0.0),
+        &common::checkpointed(&frictionless, 1_000_000_000),
+    )
+    .unwrap();
+    let (with, without) = (
+        late_stress_ratio(&reference),
+        late_stress_ratio(&frictionless),
+    );
+    assert!(
+        with > 1.3 * without,
+        "shear stress ratio {with} with friction against {without} without"
+    );
+    for d in [reference, two, frictionless] {
+        std::fs::remove_dir_all(&d).ok();
+    }
+}
+
+#[test]
+fn every_wall_gets_its_own_coefficient() {
+    // The box walls' coefficients (one for all, or one each), then each plane's, in the order
+    // of the run's walls.
+    let parse = |extra: &str| {
+        let text = common::SMALL_COMPACTION.replace(
+            "output: (every: 50),",
+            &format!("output: (every: 50),\n{extra}"),
+        );
+        let s = Scenario::parse(&text, "walls.ron").unwrap();
+        s.validate().unwrap();
+        s
+    };
+    let s = parse(
+        "contact: (friction: (walls: 0.3)), planes: [(point: (0.0, 0.0), normal: (1.0, 1.0), friction: 0.6)],",
+    );
+    assert_eq!(s.wall_friction(), vec![0.3, 0.3, 0.3, 0.3, 0.6]);
+    let s = parse("contact: (friction: (walls: 0.3, each_wall: (0.1, 0.2, 0.0, 0.4))),");
+    assert_eq!(s.wall_friction(), vec![0.1, 0.2, 0.0, 0.4]);
+    assert!(s.tangential_ratio() > 0.0);
+    let walls = s.parameters().friction.expect("frictional walls").walls;
+    assert_eq!(&walls[..4], &[0.1, 0.2, 0.0, 0.4]);
+    // Frictionless everywhere: no friction at all, and the frictionless time step.
+    let s = parse("contact: (friction: (each_wall: (0.0, 0.0, 0.0, 0.0))),");
+    assert!(s.parameters().friction.is_none());
+    assert_eq!(
+        s.critical_time_step(),
+        common::small_compaction().critical_time_step()
     );
 }

@@ -499,19 +499,7 @@ fn a_sheared_cell_resumes_bitwise_and_is_the_same_on_any_thread_count() {
     })
     .unwrap();
     let same_files = |a: &std::path::Path, b: &std::path::Path| {
-        for file in ["macro.csv", "grains.csv"] {
-            let x = std::fs::read(a.join(file)).unwrap();
-            let y = std::fs::read(b.join(file)).unwrap();
-            assert!(x == y, "{file} differs between {a:?} and {b:?}");
-        }
-        let (ca, cb) = (
-            Checkpoint::read(&a.join("checkpoint.bin")).unwrap(),
-            Checkpoint::read(&b.join("checkpoint.bin")).unwrap(),
-        );
-        assert_eq!(
-            common::grain_bits(&ca.grains),
-            common::grain_bits(&cb.grains)
-        );
+        let (ca, cb) = common::assert_same_run(a, b);
         assert_eq!(ca.periodic, cb.periodic);
         assert_eq!(ca.program, cb.program);
     };

@@ -20,47 +20,35 @@ samples.svg in --out, and prints the tables. Stdlib only.
 import argparse
 import csv
 import math
-import os
 import pathlib
 import re
 import shutil
-import subprocess
 import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
 sys.path.insert(0, str(ROOT / "tools"))
 from meshfree_biaxial_plot import panel  # noqa: E402
-
-
-def without_comments(text):
-    return re.sub(r"//[^\n]*", "", text)
+from periodic_study import run as run_text  # noqa: E402
 
 
 def run(sdem, run_dir, text, extra_files=(), threads=1):
-    """Runs the scenario `text` in `run_dir` (its sample files copied beside it) unless a
-    finished run of the same scenario is there; returns the CPU seconds."""
-    scenario = run_dir.parent / f"{run_dir.name}.ron"
-    cost = run_dir / "cost.txt"
-    if (scenario.exists() and without_comments(scenario.read_text()) == without_comments(text)
-            and cost.exists() and (run_dir / "summary.txt").exists()):
-        return float(cost.read_text())
+    """Runs the scenario `text` in `run_dir`, its sample files copied beside it, unless a
+    finished run of the same scenario is there (periodic_study.run); returns the CPU seconds."""
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     for f in extra_files:
         shutil.copy(SCENARIOS / f, run_dir.parent / f)
-    scenario.write_text(text)
-    print(f"running {run_dir.name} ...", flush=True)
-    with open(run_dir.parent / f"{run_dir.name}.stderr", "w") as err:
-        proc = subprocess.Popen(["nice", "-n", "5", sdem, "run", str(scenario), "--out", str(run_dir),
-                                 "--quiet", "--threads", str(threads)],
-                                stdout=subprocess.DEVNULL, stderr=err)
-        _, status, usage = os.wait4(proc.pid, 0)
-    code = os.waitstatus_to_exitcode(status)
-    if code != 0:
-        raise RuntimeError(f"{run_dir.name}: sdem exited with {code}; see its .stderr")
-    cpu = usage.ru_utime + usage.ru_stime
-    cost.write_text(f"{cpu}\n")
-    return cpu
+    return run_text(sdem, run_dir, text, threads)
+
+
+def print_table(title, rows):
+    """The rows (dicts) as aligned columns, without the CPU time."""
+    keys = [k for k in rows[0] if k != "cpu_s"]
+    widths = [max(len(k), *(len(str(r[k])) for r in rows)) for k in keys]
+    print(f"\n{title}")
+    print("  ".join(k.ljust(w) for k, w in zip(keys, widths)))
+    for r in rows:
+        print("  ".join(str(r[k]).ljust(w) for k, w in zip(keys, widths)))
 
 
 def rows_of(run_dir):
@@ -101,11 +89,7 @@ def rolling(a, out):
         rows.append({"level": level, "dbeta_deg": res, "mu": mu, "t_end": f"{t:.6g}",
                      "s": f"{s:.5f}", "expected": f"{expected:.5f}", "cpu_s": f"{cpu:.2f}"})
     write_csv(out / "rolling.csv", rows)
-    print("\nrolling disc (s at t = 20 ms)")
-    print("level   dbeta  mu    s        expected")
-    for r in rows:
-        print(f"{r['level']:<7} {r['dbeta_deg']:<6} {r['mu']:<5} {r['s']}  {r['expected']}")
-
+    print_table("rolling disc (s at t = 20 ms)", rows)
 
 def compaction(a, out):
     """The 30-disc compaction, quasi-static and at 5 m/s, mu = 0 and 0.5."""
@@ -141,11 +125,8 @@ def compaction(a, out):
                          "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}",
                          "cpu_s": f"{cpu:.2f}"})
     write_csv(out / "compaction30.csv", rows)
-    print("\n30-disc compaction, at the final box (30% vertical strain; 40% for the deep runs)")
-    print("mu   loading        strain  phi      syy_c (Pa)  ln(Vs/Vs0)")
-    for r in rows:
-        print(f"{r['mu']:<4} {r['loading']:<14} {r['true_strain']}  {r['phi']}  {r['syy_c_Pa']}  "
-              f"{r['ln_Vs_Vs0']}")
+    print_table("30-disc compaction, at the final box (30% vertical strain; 40% for the deep runs)",
+                rows)
     gain = float(rows[3]["phi"]) - float(rows[0]["phi"])
     print(f"compaction30_phi_gain_with_friction = {gain}")
     labels = {k: f"mu = {'0.5' if k[0] == '05' else '0'}, {k[1]}" for k in curves}
@@ -205,11 +186,7 @@ def samples(a, out):
                          "p_c_0.95": f"{p_at(data, 0.95):.4e}",
                          "z_at_0.95": data[-1]["z"], "cpu_s": f"{cpu:.0f}"})
     write_csv(out / "samples.csv", rows)
-    print("\nsamples A and B, isotropic compaction, frictionless walls")
-    print("sample mu   phi0    z0     phi0(3-rule) p_c(0.85)   p_c(0.90)   p_c(0.95)   z(0.95)")
-    for r in rows:
-        print(f"{r['sample']:<6} {r['mu']:<4} {r['phi0']:<7} {r['z0']:<6} {r['phi0_3rule'][:7]:<12} "
-              f"{r['p_c_0.85']}  {r['p_c_0.90']}  {r['p_c_0.95']}  {r['z_at_0.95']}")
+    print_table("samples A and B, isotropic compaction, frictionless walls", rows)
     keys = list(curves)
     colours = {"A": "#c33", "B": "#36c"}
     svg = ['<svg xmlns="http://www.w3.org/2000/svg" width="900" height="620" '

@@ -24,6 +24,9 @@ pub struct FrictionSettings {
     pub grains: f64,
     /// Coulomb coefficient mu between the grains and the four box walls.
     pub walls: f64,
+    /// Each box wall's own coefficient (left, right, bottom, top), in place of `walls`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub each_wall: Option<[f64; 4]>,
     /// `r_t = K_t / K_n`, the tangential stiffness over the secant normal stiffness, in (0, 10].
     pub stiffness_ratio: f64,
     /// gamma_t of the tangential dashpot `gamma_t sqrt(K_t m_eff)` (dimensionless, >= 0).
@@ -35,6 +38,7 @@ impl Default for FrictionSettings {
         Self {
             grains: 0.0,
             walls: 0.0,
+            each_wall: None,
             stiffness_ratio: 1.0,
             damping: 0.0,
         }
@@ -48,7 +52,12 @@ impl FrictionSettings {
 
     /// Frictionless between grains and at the box walls.
     pub fn is_frictionless(&self) -> bool {
-        self.grains == 0.0 && self.walls == 0.0
+        self.grains == 0.0 && self.box_walls().iter().all(|&mu| mu == 0.0)
+    }
+
+    /// The coefficients of the four box walls (left, right, bottom, top).
+    pub fn box_walls(&self) -> [f64; 4] {
+        self.each_wall.unwrap_or([self.walls; 4])
     }
 
     /// The first field out of its range: (field, value, allowed range).
@@ -59,6 +68,14 @@ impl FrictionSettings {
         }
         if !(self.walls.is_finite() && self.walls >= 0.0) {
             return Err(("walls", self.walls, coefficient));
+        }
+        if let Some(&mu) = self
+            .each_wall
+            .iter()
+            .flatten()
+            .find(|mu| !(mu.is_finite() && **mu >= 0.0))
+        {
+            return Err(("each_wall", mu, coefficient));
         }
         if !(self.stiffness_ratio > 0.0 && self.stiffness_ratio <= MAX_STIFFNESS_RATIO) {
             return Err(("stiffness_ratio", self.stiffness_ratio, "in (0, 10]"));

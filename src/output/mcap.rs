@@ -837,9 +837,9 @@ fn encode_scene(out: &mut String, world: &World, log_time: u64) {
 
 /// The box entity of `/scene` (after a comma): a line loop through the corners of the four
 /// walls (a periodic cell's sides: a parallelogram), `0.25 * mean_radius` thick; nothing
-/// unless there are four walls.
+/// unless there are at least four walls (planes after the box's four are not drawn).
 fn encode_box(out: &mut String, walls: &[Wall], log_time: u64, mean_radius: f64, decimals: usize) {
-    if walls.len() == 4 {
+    if walls.len() >= 4 {
         use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
         let (x0, x1) = (walls[LEFT].point.x, walls[RIGHT].point.x);
         let (y0, y1) = (walls[BOTTOM].point.y, walls[TOP].point.y);

@@ -186,7 +186,8 @@ fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) 
         let hi = corners.iter().fold(corners[0], |a, b| a.max(*b));
         return (lo, hi);
     }
-    if frame.walls.len() == 4 {
+    // The first four walls are the box's; planes (a scenario's `planes`) follow them.
+    if frame.walls.len() >= 4 {
         let lo = DVec2::new(frame.walls[LEFT].point.x, frame.walls[BOTTOM].point.y);
         let hi = DVec2::new(frame.walls[RIGHT].point.x, frame.walls[TOP].point.y);
         if (hi - lo).min_element() > 0.0 && lo.is_finite() && hi.is_finite() {
@@ -208,6 +209,25 @@ fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) 
         return (DVec2::ZERO, DVec2::ONE);
     }
     (lo, hi)
+}
+
+/// The segment of the line through `point` along `direction` inside the box `[lo, hi]`, if it
+/// crosses it (Liang–Barsky clipping of the line's parameter).
+fn line_in_box(point: DVec2, direction: DVec2, lo: DVec2, hi: DVec2) -> Option<(DVec2, DVec2)> {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for axis in 0..2 {
+        let (p, d) = (point[axis], direction[axis]);
+        if d == 0.0 {
+            if p < lo[axis] || p > hi[axis] {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo[axis] - p) / d, (hi[axis] - p) / d);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    (t0 < t1).then(|| (point + t0 * direction, point + t1 * direction))
 }
 
 /// Draws frame `frame` into `path` (PNG, or SVG if the name ends in `.svg`).
@@ -479,6 +499,19 @@ fn draw_frame_decor<DB: DrawingBackend>(
         root.draw(&PathElement::new(pixels, BLACK.stroke_width(2)))
             .map_err(err)?;
     }
+    // Planes (walls after the box's four), as their segment inside the view.
+    if frame.cell.is_none() {
+        for wall in frame.walls.iter().skip(4) {
+            if let Some((a, b)) = line_in_box(wall.point, wall.normal.perp(), layout.lo, layout.hi)
+            {
+                root.draw(&PathElement::new(
+                    vec![layout.pixel(a), layout.pixel(b)],
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(err)?;
+            }
+        }
+    }
 
     // Caption.
     let font = |size: u32| (FONT_FAMILY, size).into_font().color(&BLACK);
@@ -547,6 +580,26 @@ fn draw_frame_decor<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_plane_is_drawn_as_its_chord_of_the_view() {
+        let (lo, hi) = (DVec2::ZERO, DVec2::ONE);
+        // x + y = 1 crosses the unit square from (1, 0) to (0, 1) (in either order).
+        let (a, b) = line_in_box(DVec2::new(0.5, 0.5), DVec2::new(-1.0, 1.0), lo, hi).unwrap();
+        let ends = [a, b];
+        assert!(
+            ends.iter()
+                .any(|e| e.distance(DVec2::new(1.0, 0.0)) < 1e-12)
+        );
+        assert!(
+            ends.iter()
+                .any(|e| e.distance(DVec2::new(0.0, 1.0)) < 1e-12)
+        );
+        // A horizontal line inside, and one outside the view.
+        let (a, b) = line_in_box(DVec2::new(0.3, 0.25), DVec2::X, lo, hi).unwrap();
+        assert_eq!((a.x.min(b.x), a.x.max(b.x), a.y), (0.0, 1.0, 0.25));
+        assert!(line_in_box(DVec2::new(0.0, 2.0), DVec2::X, lo, hi).is_none());
+    }
 
     #[test]
     fn clipping_a_square_by_a_half_plane() {

@@ -213,7 +213,25 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
             )));
         }
     };
-    let world = World::new(scenario.parameters(), grains, scenario.walls());
+    let walls = scenario.walls();
+    // A plane cutting through the box must have the grains on its side.
+    for (k, plane) in walls.iter().enumerate().skip(4) {
+        if let Some((g, grain)) = grains
+            .iter()
+            .enumerate()
+            .find(|(_, g)| plane.height(g.center) <= 0.0)
+        {
+            return Err(RunError::Setup(format!(
+                "grain {g} (centre ({}, {}), radius {}) lies beyond planes[{}]: its centre is on \
+                 the far side of the plane; place the sample on the side its normal points to",
+                grain.center.x,
+                grain.center.y,
+                grain.radius,
+                k - 4
+            )));
+        }
+    }
+    let world = World::new(scenario.parameters(), grains, walls);
     Ok(match scenario.boundary {
         Boundary::Walls => world,
         Boundary::Periodic => world.with_periodic(PeriodicBoundary::default()),

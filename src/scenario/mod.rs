@@ -1168,10 +1168,10 @@ impl Scenario {
         walls
     }
 
-    /// Coulomb coefficient of each wall: the four box walls' (`contact.friction.walls`), then
-    /// the planes'.
+    /// Coulomb coefficient of each wall: the four box walls' (`contact.friction.walls`, or
+    /// `each_wall`), then the planes'.
     pub fn wall_friction(&self) -> Vec<f64> {
-        let mut mu = vec![self.contact.friction.walls; 4];
+        let mut mu = self.contact.friction.box_walls().to_vec();
         mu.extend(self.planes.iter().map(|p| p.friction));
         mu
     }

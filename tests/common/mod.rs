@@ -105,6 +105,23 @@ pub fn grain_bits(g: &[Grain]) -> Vec<[u64; 13]> {
         .collect()
 }
 
+/// Asserts that two finished runs wrote the same `macro.csv` and `grains.csv`, byte for byte,
+/// and left checkpoints with bitwise the same grains; returns the two checkpoints for the
+/// caller's own comparisons.
+pub fn assert_same_run(a: &Path, b: &Path) -> (Checkpoint, Checkpoint) {
+    for file in ["macro.csv", "grains.csv"] {
+        let x = std::fs::read(a.join(file)).unwrap();
+        let y = std::fs::read(b.join(file)).unwrap();
+        assert!(x == y, "{file} differs between {a:?} and {b:?}");
+    }
+    let (ca, cb) = (
+        Checkpoint::read(&a.join("checkpoint.bin")).unwrap(),
+        Checkpoint::read(&b.join("checkpoint.bin")).unwrap(),
+    );
+    assert_eq!(grain_bits(&ca.grains), grain_bits(&cb.grains));
+    (ca, cb)
+}
+
 /// Runs `f` on a rayon pool of `threads` threads.
 pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
     rayon::ThreadPoolBuilder::new()
