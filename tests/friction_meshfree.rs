@@ -579,3 +579,39 @@ fn hertz_2d_table() {
         println!("nb {nb}: {cpu:.1} s");
     }
 }
+
+#[test]
+fn meshfree_scenarios_take_friction_but_no_dashpot() {
+    // The scenario's friction reaches the meshfree model (walls, planes, grains); the
+    // tangential dashpot is SDEM's and a meshfree scenario asking for it is refused, naming it.
+    let text = |friction: &str| {
+        format!(
+            r#"Scenario(
+                name: "mf_friction",
+                sample: (count: 2, box_width: 0.4, box_height: 0.4,
+                         radii: Uniform(min: 0.06, max: 0.07)),
+                material: (young: 1.0, poisson: 0.3, density: 1.0),
+                model: Meshfree((boundary_nodes: 16)),
+                contact: (friction: ({friction})),
+                planes: [(point: (0.0, 0.05), normal: (0.2, 1.0), friction: 0.3)],
+                time_step: Fixed(0.01),
+                loading: [Relax(until: Steps(1))],
+            )"#
+        )
+    };
+    let ok = Scenario::parse(
+        &text("grains: 0.5, walls: 0.4, stiffness_ratio: 2.0"),
+        "ok.ron",
+    )
+    .unwrap();
+    ok.validate().unwrap();
+    let sim = Meshfree::new(&ok).unwrap();
+    let f = sim.assembly.friction();
+    assert_eq!(f.grains, 0.5);
+    assert_eq!(f.walls, vec![0.4, 0.4, 0.4, 0.4, 0.3]);
+    assert_eq!(f.stiffness_ratio, 2.0);
+    assert_eq!(sim.assembly.walls.len(), 5);
+    let bad = Scenario::parse(&text("grains: 0.5, damping: 0.1"), "bad.ron").unwrap();
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("contact.friction.damping"), "{e}");
+}
