@@ -214,16 +214,31 @@ fn stiffness_damping_with_the_explicit_scheme_is_refused() {
 }
 
 #[test]
-fn gravity_with_an_sdem_model_is_refused() {
-    let e = failing(
-        "gravity",
-        &replaced(IMPLICIT_MODEL, "model: Full,\n    gravity: (0.0, -1.0),").replace(
+fn gravity_pulls_sdem_grains_too() {
+    // Expectation: gravity is a body force of both solvers; the same SDEM scenario with
+    // gravity (0, -1) ends with its grains lower than without it.
+    let sdem_scenario = |gravity: &str| {
+        replaced(IMPLICIT_MODEL, &format!("model: Full,{gravity}")).replace(
             "time_step: Fixed(0.02)",
             "time_step: FractionOfCritical(0.4)",
-        ),
-        &[],
+        )
+    };
+    let mean_height = |test: &str, scenario: &str| {
+        let (_, _, s) = succeeding(test, scenario);
+        let grains = std::fs::read_to_string(s.0.join("out/grains.csv")).unwrap();
+        let ys: Vec<f64> = grains
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+            .collect();
+        ys.iter().sum::<f64>() / ys.len() as f64
+    };
+    let free = mean_height("gravity-off", &sdem_scenario(""));
+    let pulled = mean_height("gravity-on", &sdem_scenario("\n    gravity: (0.0, -1.0),"));
+    assert!(
+        pulled < free - 1e-3,
+        "{pulled} against {free} without gravity"
     );
-    assert!(e.contains("gravity") && e.contains("meshfree"), "{e}");
 }
 
 const SHAPES_SAMPLE: &str = "box_width: 0.5,
