@@ -13,6 +13,15 @@
 //! Sign conventions: the residual is `f_int - f_ext - f_contact + M A + C V`; a contact's
 //! pressure `T = <lambda - k g>` is positive in compression, its gap `g` negative when the
 //! slave node is inside the master.
+//!
+//! Friction (SPEC §13, [`super::friction`]): an element against a master with a Coulomb
+//! coefficient `mu > 0` carries a tangential traction from a return mapping. Its slip over a
+//! (sub-)step is measured from where the slave node was at the last converged state (the
+//! [`SlipOrigin`]); its tangential multiplier starts each step at the traction committed at the
+//! end of the last one ([`AssemblyState::friction`]) and follows the augmentations as the
+//! normal one does; the augmentations stop once sticking nodes have not slipped by more than
+//! the gap tolerance either. Frictionless contacts take none of this: with every `mu = 0` the
+//! results are those of the frictionless code, bit for bit.
 
 use std::collections::BTreeMap;
 
@@ -20,6 +29,7 @@ use rayon::prelude::*;
 
 use super::MeshfreeError;
 use super::contact::wall_node_element;
+use super::friction::{FrictionCoefficients, TangentialInput};
 use super::model::{Dense, GrainModel};
 use super::nts;
 use super::solver::{
@@ -66,8 +76,37 @@ pub struct ContactKey {
     pub master: Master,
 }
 
-/// Augmented-Lagrangian multipliers (contact pressures, > 0) of the active elements.
+/// Augmented-Lagrangian multipliers (contact pressures, > 0) of the active elements; also the
+/// tangential multipliers (tractions) of the frictional ones.
 pub type ContactMultipliers = BTreeMap<ContactKey, f64>;
+
+/// Where the slave nodes were at the last converged state: the origin of the slip of a step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlipOrigin {
+    /// Each grain's contour nodes.
+    pub contours: Vec<Vec<[f64; 2]>>,
+    /// Each wall's point.
+    pub wall_points: Vec<[f64; 2]>,
+}
+
+/// The friction state an evaluation reads: the tangential multipliers and the slip origin.
+#[derive(Debug, Clone, Copy)]
+pub struct FrictionInput<'a> {
+    pub tractions: &'a ContactMultipliers,
+    pub origin: &'a SlipOrigin,
+}
+
+/// Friction of an evaluated element.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ElementFriction {
+    /// Tangential traction t (per unit length): the force on the slave node is
+    /// `-t A_s tangent`, `tangent` the normal turned by +90°.
+    pub traction: f64,
+    /// Slip of the slave node over the step, along `tangent`.
+    pub slip: f64,
+    /// Whether the return mapping stuck.
+    pub sticking: bool,
+}
 
 /// An evaluated, active contact element.
 #[derive(Debug, Clone)]
@@ -78,6 +117,8 @@ pub struct ContactElement {
     pub tributary: f64,
     /// Unit normal of the force on the slave node.
     pub normal: [f64; 2],
+    /// Friction, for an element against a master with `mu > 0`.
+    pub friction: Option<ElementFriction>,
     /// Where the slave node is (current position).
     pub point: [f64; 2],
     /// Global DoF of the element's nodes (6 for a wall element, 14 for node-to-segment).
@@ -114,6 +155,7 @@ impl ContactElement {
             pressure,
             tributary,
             normal,
+            friction: None,
             point,
             dofs,
             force: force.to_vec(),
@@ -134,6 +176,9 @@ pub struct Evaluation {
     /// Each grain's tangent blocks (internal, inertia, damping) on its pattern, when the
     /// evaluation was asked for the tangent (empty otherwise).
     pub grain_blocks: Vec<Vec<[f64; 4]>>,
+    /// Energy dissipated by friction over the step that ended at this evaluation, all its
+    /// sub-steps together (set by [`Assembly::step`]; 0 for a bare evaluation).
+    pub dissipation: f64,
 }
 
 impl Evaluation {
@@ -145,12 +190,46 @@ impl Evaluation {
             .fold(0.0, f64::max)
     }
 
-    /// Largest |g| over active elements (the augmentation loop's stop test).
+    /// Largest |g| over active elements.
     pub fn max_abs_gap(&self) -> f64 {
         self.elements
             .iter()
             .map(|e| e.gap.abs())
             .fold(0.0, f64::max)
+    }
+
+    /// The augmentation loop's stop test: the largest |g| over active elements and |slip|
+    /// over sticking ones (the stick constraint: no slip over the step).
+    pub fn constraint_violation(&self) -> f64 {
+        self.elements
+            .iter()
+            .map(|e| match e.friction {
+                Some(f) if f.sticking => e.gap.abs().max(f.slip.abs()),
+                _ => e.gap.abs(),
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// The tangential multipliers of this evaluation: each frictional element's traction.
+    pub fn tractions(&self) -> ContactMultipliers {
+        self.elements
+            .iter()
+            .filter_map(|e| e.friction.map(|f| (e.key, f.traction)))
+            .collect()
+    }
+
+    /// Energy dissipated by friction over the slips of this evaluation: `sum |t| A_s |slip|`
+    /// over slipping elements (`|t| = mu p_N`: the work of the friction forces on the slips
+    /// since the slip origin).
+    pub fn friction_dissipation(&self) -> f64 {
+        self.elements
+            .iter()
+            .filter_map(|e| {
+                e.friction
+                    .filter(|f| !f.sticking)
+                    .map(|f| f.traction.abs() * e.tributary * f.slip.abs())
+            })
+            .sum()
     }
 
     /// Total force of the grains on wall `w` (a vector: minus the sum of the wall elements'
@@ -162,6 +241,12 @@ impl Evaluation {
                 let t = e.pressure * e.tributary;
                 f[0] -= t * e.normal[0];
                 f[1] -= t * e.normal[1];
+                if let Some(fr) = e.friction {
+                    // The grain receives -t A_s tangent, tangent = (-n_y, n_x).
+                    let q = fr.traction * e.tributary;
+                    f[0] += q * -e.normal[1];
+                    f[1] += q * e.normal[0];
+                }
             }
         }
         f
@@ -223,6 +308,9 @@ pub struct AssemblyState {
     pub v: Vec<f64>,
     pub a: Vec<f64>,
     pub multipliers: ContactMultipliers,
+    /// Tangential tractions of the frictional elements committed at the end of the last
+    /// converged (sub-)step: the friction history.
+    pub friction: ContactMultipliers,
 }
 
 /// Counters of one step.
@@ -243,6 +331,8 @@ pub struct Assembly {
     pub walls: Vec<Wall>,
     pub gravity: [f64; 2],
     pub settings: SolverSettings,
+    /// Coulomb coefficients (frictionless by default); set with [`Assembly::set_friction`].
+    friction: FrictionCoefficients,
     /// Rayleigh damping `C = alpha M + beta K_i0`.
     pub rayleigh: (f64, f64),
     /// DoF held at their current value (quasi-static problems: rigid modes).
@@ -448,6 +538,7 @@ impl Assembly {
             walls,
             gravity,
             settings,
+            friction: FrictionCoefficients::default(),
             rayleigh,
             fixed: Vec::new(),
             near_distance: 2.0 * spacing,
@@ -462,6 +553,30 @@ impl Assembly {
 
     pub fn dofs(&self) -> usize {
         *self.offsets.last().unwrap()
+    }
+
+    /// Sets the Coulomb coefficients of the contacts (refused: a negative or non-finite mu, a
+    /// stiffness ratio outside (0, 10]).
+    pub fn set_friction(&mut self, friction: FrictionCoefficients) -> Result<(), MeshfreeError> {
+        friction
+            .validate()
+            .map_err(|e| MeshfreeError::BadInput(format!("friction: {e}")))?;
+        self.friction = friction;
+        Ok(())
+    }
+
+    pub fn friction(&self) -> &FrictionCoefficients {
+        &self.friction
+    }
+
+    /// The slip origin of a step starting at `u` with the walls where they are now.
+    pub fn slip_origin(&self, u: &[f64]) -> SlipOrigin {
+        SlipOrigin {
+            contours: (0..self.grains.len())
+                .map(|g| contour(&self.grains[g], self.grain_slice(u, g)))
+                .collect(),
+            wall_points: self.walls.iter().map(|w| [w.point.x, w.point.y]).collect(),
+        }
     }
 
     /// First global DoF of grain `g`.
@@ -512,6 +627,7 @@ impl Assembly {
         contours: &[Vec<[f64; 2]>],
         masters: &[u32],
         multipliers: &ContactMultipliers,
+        friction: Option<FrictionInput<'_>>,
         k: f64,
         with_tangent: bool,
     ) -> Vec<ContactElement> {
@@ -521,6 +637,7 @@ impl Assembly {
         let off_i = self.offsets[i];
         let lambda_of = |key: &ContactKey| multipliers.get(key).copied().unwrap_or(0.0);
         let d = self.near_distance;
+        let grain_friction = friction.filter(|_| self.friction.grains > 0.0);
         for &j in masters {
             let j = j as usize;
             let master = &contours[j];
@@ -560,13 +677,30 @@ impl Assembly {
                     master[master_nodes[2]],
                     master[master_nodes[3]],
                 ];
-                let Some(e) = nts::evaluate(&x, lambda_of(&key), k, with_tangent) else {
+                let tangential = grain_friction.and_then(|fr| {
+                    let origin =
+                        slip_origin_xi(&fr.origin.contours[j], fr.origin.contours[i][s], first)?;
+                    Some(TangentialInput {
+                        mu: self.friction.grains,
+                        penalty: self.friction.stiffness_ratio * k,
+                        lambda: fr.tractions.get(&key).copied().unwrap_or(0.0),
+                        origin,
+                    })
+                });
+                let Some(e) = nts::evaluate_frictional(
+                    &x,
+                    lambda_of(&key),
+                    k,
+                    tangential.as_ref(),
+                    with_tangent,
+                    0.0,
+                ) else {
                     continue;
                 };
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                out.push(ContactElement::new(
+                let mut element = ContactElement::new(
                     key,
                     [e.gap, e.pressure, e.tributary],
                     e.normal,
@@ -574,11 +708,21 @@ impl Assembly {
                     &[(off_i, &slave_nodes), (off_j, &master_nodes)],
                     &e.force,
                     with_tangent.then_some(&e.stiffness),
-                ));
+                );
+                if tangential.is_some() {
+                    element.friction = Some(ElementFriction {
+                        traction: e.traction,
+                        slip: e.slip,
+                        sticking: e.sticking,
+                    });
+                }
+                out.push(element);
             }
         }
         for (w, wall) in self.walls.iter().enumerate() {
             let (p, n) = ([wall.point.x, wall.point.y], [wall.normal.x, wall.normal.y]);
+            let mu = self.friction.wall(w);
+            let wall_friction = friction.filter(|_| mu > 0.0).map(|f| (mu, f));
             for s in 0..nb {
                 let key = ContactKey {
                     slave: i as u32,
@@ -587,11 +731,28 @@ impl Assembly {
                 };
                 let nodes = [(s + nb - 1) % nb, s, (s + 1) % nb];
                 let x = nodes.map(|a| slave[a]);
-                let e = wall_node_element(&x, p, n, lambda_of(&key), k, with_tangent);
+                let tangential = wall_friction.map(|(mu, fr)| {
+                    let (o, q) = (fr.origin.contours[i][s], fr.origin.wall_points[w]);
+                    TangentialInput {
+                        mu,
+                        penalty: self.friction.stiffness_ratio * k,
+                        lambda: fr.tractions.get(&key).copied().unwrap_or(0.0),
+                        origin: (o[0] - q[0]) * -n[1] + (o[1] - q[1]) * n[0],
+                    }
+                });
+                let e = wall_node_element(
+                    &x,
+                    p,
+                    n,
+                    lambda_of(&key),
+                    k,
+                    tangential.as_ref(),
+                    with_tangent,
+                );
                 if e.pressure <= 0.0 {
                     continue;
                 }
-                out.push(ContactElement::new(
+                let mut element = ContactElement::new(
                     key,
                     [e.gap, e.pressure, e.tributary],
                     n,
@@ -599,18 +760,39 @@ impl Assembly {
                     &[(off_i, &nodes)],
                     &e.force,
                     with_tangent.then_some(&e.stiffness),
-                ));
+                );
+                if tangential.is_some() {
+                    element.friction = Some(ElementFriction {
+                        traction: e.traction,
+                        slip: e.slip,
+                        sticking: e.sticking,
+                    });
+                }
+                out.push(element);
             }
         }
         out
     }
 
     /// Residual at displacement `u`, and with `with_tangent` the pieces of its Jacobian
-    /// (grain blocks and contact elements' stiffness).
+    /// (grain blocks and contact elements' stiffness); frictionless contacts.
     pub fn evaluate(
         &self,
         u: &[f64],
         multipliers: &ContactMultipliers,
+        k: f64,
+        dynamic: Option<&DynamicTerms>,
+        with_tangent: bool,
+    ) -> Result<Evaluation, MeshfreeError> {
+        self.evaluate_with(u, multipliers, None, k, dynamic, with_tangent)
+    }
+
+    /// [`Assembly::evaluate`] with the friction state of the step (`None`: frictionless).
+    pub fn evaluate_with(
+        &self,
+        u: &[f64],
+        multipliers: &ContactMultipliers,
+        friction: Option<FrictionInput<'_>>,
         k: f64,
         dynamic: Option<&DynamicTerms>,
         with_tangent: bool,
@@ -691,7 +873,15 @@ impl Assembly {
         let elements: Vec<ContactElement> = (0..self.grains.len())
             .into_par_iter()
             .map(|i| {
-                self.slave_elements(i, &contours, &neighbours[i], multipliers, k, with_tangent)
+                self.slave_elements(
+                    i,
+                    &contours,
+                    &neighbours[i],
+                    multipliers,
+                    friction,
+                    k,
+                    with_tangent,
+                )
             })
             .collect::<Vec<_>>()
             .into_iter()
@@ -725,6 +915,7 @@ impl Assembly {
             elastic_energy,
             force_scale,
             grain_blocks,
+            dissipation: 0.0,
         })
     }
 
@@ -811,17 +1002,19 @@ impl Assembly {
     /// factorization. A modified step that does not reduce the residual is undone and redone
     /// with the tangent. The convergence test needs the residual only: the tangent is
     /// computed only when a full step follows.
+    #[allow(clippy::too_many_arguments)]
     fn newton(
         &mut self,
         u: &mut Vec<f64>,
         multipliers: &ContactMultipliers,
+        friction: Option<FrictionInput<'_>>,
         k: f64,
         dynamic: Option<&DynamicTerms>,
         open_gap_tolerance: Option<f64>,
         stats: &mut SolveStats,
     ) -> Result<(Evaluation, NewtonEnd), MeshfreeError> {
         let mut tangent = TripletMatrix::new(self.dofs());
-        let mut eval = self.evaluate(u, multipliers, k, dynamic, false)?;
+        let mut eval = self.evaluate_with(u, multipliers, friction, k, dynamic, false)?;
         let mut norm = finite_residual_norm(&eval.residual)?;
         let mut previous_norm = f64::INFINITY;
         // Whether the solver holds a factorization of this loop's tangent.
@@ -835,7 +1028,7 @@ impl Assembly {
                 return Ok((eval, NewtonEnd::Converged));
             }
             if let Some(tolerance) = open_gap_tolerance {
-                let gap = eval.max_abs_gap();
+                let gap = eval.constraint_violation();
                 if gap > tolerance && last_correction <= EARLY_AUGMENTATION_STEP * (gap - tolerance)
                 {
                     return Ok((eval, NewtonEnd::GapOpen));
@@ -857,7 +1050,8 @@ impl Assembly {
                 self.solver.solve_factored(&mut du)?;
             } else {
                 before_modified = None;
-                let with_tangent = self.evaluate(u, multipliers, k, dynamic, true)?;
+                let with_tangent =
+                    self.evaluate_with(u, multipliers, friction, k, dynamic, true)?;
                 self.fill_tangent(&with_tangent, &mut tangent);
                 du = with_tangent.residual.iter().map(|v| -v).collect();
                 self.solver.solve(&tangent, &mut du)?;
@@ -867,7 +1061,7 @@ impl Assembly {
             let applied = newton_update(u, &du, |trial| self.all_points_valid(trial))?;
             last_correction = applied * du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             previous_norm = norm;
-            eval = self.evaluate(u, multipliers, k, dynamic, false)?;
+            eval = self.evaluate_with(u, multipliers, friction, k, dynamic, false)?;
             norm = finite_residual_norm(&eval.residual)?;
         }
         if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
@@ -880,11 +1074,24 @@ impl Assembly {
     }
 
     /// Newton loops nested in augmentation loops (k reset to k0, doubled at each
-    /// augmentation); `u` and `multipliers` are updated in place.
+    /// augmentation); `u` and `multipliers` are updated in place. Frictionless contacts.
     pub fn solve(
         &mut self,
         u: &mut Vec<f64>,
         multipliers: &mut ContactMultipliers,
+        dynamic: Option<&DynamicTerms>,
+    ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        self.solve_with(u, multipliers, None, dynamic)
+    }
+
+    /// [`Assembly::solve`] with friction: `friction` holds the tangential multipliers (on
+    /// entry the tractions committed at the last converged state, on return those of the
+    /// solution) and the slip origin.
+    pub fn solve_with(
+        &mut self,
+        u: &mut Vec<f64>,
+        multipliers: &mut ContactMultipliers,
+        mut friction: Option<(&mut ContactMultipliers, &SlipOrigin)>,
         dynamic: Option<&DynamicTerms>,
     ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
         let s = self.settings;
@@ -893,14 +1100,22 @@ impl Assembly {
         for augmentation in 0..s.max_augmentations {
             // The last allowed augmentation is converged fully whatever its gap.
             let open_gap = (augmentation + 1 < s.max_augmentations).then_some(s.gap_tolerance);
-            let (eval, end) = self.newton(u, multipliers, k, dynamic, open_gap, &mut stats)?;
+            let input = friction.as_ref().map(|(t, o)| FrictionInput {
+                tractions: t,
+                origin: o,
+            });
+            let (eval, end) =
+                self.newton(u, multipliers, input, k, dynamic, open_gap, &mut stats)?;
             multipliers.clear();
             for e in &eval.elements {
                 multipliers.insert(e.key, e.pressure);
             }
+            if let Some((tractions, _)) = friction.as_mut() {
+                **tractions = eval.tractions();
+            }
             stats.augmentations += 1;
             stats.max_penetration = eval.max_penetration();
-            if end == NewtonEnd::Converged && eval.max_abs_gap() <= s.gap_tolerance {
+            if end == NewtonEnd::Converged && eval.constraint_violation() <= s.gap_tolerance {
                 return Ok((eval, stats));
             }
             k *= s.alpha_k;
@@ -922,6 +1137,7 @@ impl Assembly {
             v: vec![0.0; n],
             a: (0..n).map(|i| self.gravity[i % 2]).collect(),
             multipliers: ContactMultipliers::new(),
+            friction: ContactMultipliers::new(),
         }
     }
 
@@ -947,24 +1163,42 @@ impl Assembly {
             TimeScheme::Bathe => 0.5 * dt,
         };
         let mut multipliers = state.multipliers.clone();
+        // Friction: the tractions committed at the end of each converged sub-step, the slip
+        // measured from its start.
+        let frictional = self.friction.any();
+        let mut tractions = state.friction.clone();
+        let origin0 = frictional.then(|| self.slip_origin(u0));
         self.move_walls(&walls0, mid);
         let terms = DynamicTerms::trapezoidal(mid, u0, v0, a0, None);
         let mut u1 = u0.clone();
-        let (mut eval, s) = self.solve(&mut u1, &mut multipliers, Some(&terms))?;
+        let (mut eval, s) = self.solve_with(
+            &mut u1,
+            &mut multipliers,
+            origin0.as_ref().map(|o| (&mut tractions, o)),
+            Some(&terms),
+        )?;
         stats += s;
         let v1 = terms.velocity(&u1);
+        let mut dissipation = eval.friction_dissipation();
         let (u, v, a) = match scheme {
             TimeScheme::Trapezoidal | TimeScheme::CentralDifference => {
                 let a = terms.acceleration(&u1);
                 (u1, v1, a)
             }
             TimeScheme::Bathe => {
+                let origin1 = frictional.then(|| self.slip_origin(&u1));
                 self.move_walls(&walls0, dt);
                 let terms = DynamicTerms::backward_euler3(dt, u0, &u1, v0, &v1, None);
                 let mut u2 = u1.clone();
                 // k is reset at each sub-step (SPEC §10).
-                let (e, s) = self.solve(&mut u2, &mut multipliers, Some(&terms))?;
+                let (e, s) = self.solve_with(
+                    &mut u2,
+                    &mut multipliers,
+                    origin1.as_ref().map(|o| (&mut tractions, o)),
+                    Some(&terms),
+                )?;
                 eval = e;
+                dissipation += eval.friction_dissipation();
                 stats += s;
                 let (v, a) = (terms.velocity(&u2), terms.acceleration(&u2));
                 (u2, v, a)
@@ -974,7 +1208,9 @@ impl Assembly {
         state.v = v;
         state.a = a;
         state.multipliers = multipliers;
+        state.friction = tractions;
         state.time += dt;
+        eval.dissipation = dissipation;
         Ok((eval, stats))
     }
 
@@ -1021,8 +1257,10 @@ impl Assembly {
                 if fraction * 0.5 >= self.min_sub_step =>
             {
                 self.walls = walls0;
-                let (_, mut first) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
-                let (eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                let (first_eval, mut first) =
+                    self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                let (mut eval, second) = self.sub_steps(state, 0.5 * dt, 0.5 * fraction, scheme)?;
+                eval.dissipation += first_eval.dissipation;
                 first.solve += second.solve;
                 first.sub_steps += second.sub_steps;
                 Ok((eval, first))
@@ -1039,6 +1277,19 @@ impl Assembly {
         multipliers: &mut ContactMultipliers,
     ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
         self.solve(u, multipliers, None)
+    }
+
+    /// A quasi-static load step with friction: the slip measured from `u` on entry (the last
+    /// converged state, walls where they were then: move them after calling
+    /// [`Assembly::slip_origin`]), `tractions` committed on success.
+    pub fn solve_static_with_friction(
+        &mut self,
+        u: &mut Vec<f64>,
+        multipliers: &mut ContactMultipliers,
+        tractions: &mut ContactMultipliers,
+        origin: &SlipOrigin,
+    ) -> Result<(Evaluation, SolveStats), MeshfreeError> {
+        self.solve_with(u, multipliers, Some((tractions, origin)), None)
     }
 
     /// Potential energy of the body forces, `-f_ext . x` over the current node positions (for
@@ -1086,6 +1337,25 @@ impl Assembly {
             e += 0.5 * vg.iter().zip(&mv).map(|(a, b)| a * b).sum::<f64>();
         }
         e
+    }
+}
+
+/// The slip origin of a node-to-segment element on master segment `first` (see
+/// [`nts`]'s friction): where the slave node (at `slave` then) projected on the master's
+/// contour `master` at the last converged state, as a parameter of segment `first`
+/// (`ξ' - 2 j` for a projection at `ξ'` on the segment `j` segments back). `None` when the
+/// projection fails (the element then has no friction in this evaluation).
+fn slip_origin_xi(master: &[[f64; 2]], slave: [f64; 2], first: usize) -> Option<f64> {
+    let mb = master.len();
+    let closest =
+        (0..mb).min_by(|&a, &b| dist2(master[a], slave).total_cmp(&dist2(master[b], slave)))?;
+    let (then, xi) = nts::master_segment(master, closest, slave)?;
+    // Segments from `then` to `first` along the contour, in (-mb/2, mb/2].
+    let j = (first + mb - then) % mb;
+    if 2 * j > mb {
+        Some(xi + 2.0 * (mb - j) as f64)
+    } else {
+        Some(xi - 2.0 * j as f64)
     }
 }
 

@@ -8,7 +8,14 @@
 //! pressure) and acts on s1 as the force `T A_s n`, `A_s = (|s1 - s0| + |s2 - s1|)/2` (eq. 22,
 //! B.11). Its consistent linearisation is the paper's `K_c3 = k A_s n n^T` plus `K_c4`, the
 //! change of `A_s` with the positions of s0, s1, s2.
+//!
+//! Coulomb friction ([`super::friction`]): the slip coordinate of s1 is `g_T = (x_s1 - p) . τ`
+//! along the wall's tangent `τ` (the normal turned by +90°), its slip over the step
+//! `Δg_T = g_T - g_T,n`; the return mapping gives the tangential traction `t`, which acts on
+//! s1 as `-t A_s τ`. Its linearisation: `-τ ⊗ (A_s dt/dx + t dA_s/dx)` with
+//! `dt/dx_s1 = ε_T τ` (stick) or `mu sign(t*) dT/dx_s1 = -mu sign(t*) k n` (slip).
 
+use super::friction::{TangentialInput, return_map};
 use super::model::{Dense, DiscModel};
 
 /// A rigid, frictionless wall: the line through `point` with unit `normal` pointing to the side
@@ -93,6 +100,13 @@ pub struct WallNodeElement {
     pub pressure: f64,
     /// A_s (0 when the node is free).
     pub tributary: f64,
+    /// Tangential traction t (per unit length, resisting slip along `+τ`; 0 without friction
+    /// or when the node is free).
+    pub traction: f64,
+    /// Slip of the step `Δg_T` (0 without friction).
+    pub slip: f64,
+    /// Whether the friction return mapping stuck (false without friction).
+    pub sticking: bool,
     /// Contact force on the DoF of [s0, s1, s2] (to be subtracted from a residual
     /// `f_int - f_ext`).
     pub force: [f64; 6],
@@ -101,13 +115,15 @@ pub struct WallNodeElement {
 }
 
 /// Evaluates the element of node s1 (`x = [x_s0, x_s1, x_s2]`, current positions) against a
-/// wall through `point` with unit `normal` (towards the grain).
+/// wall through `point` with unit `normal` (towards the grain); with `friction`, a frictional
+/// wall (the slip origin `g_T,n` measured as `(x_s1,n - p_n) . τ`).
 pub fn wall_node_element(
     x: &[[f64; 2]; 3],
     point: [f64; 2],
     normal: [f64; 2],
     lambda: f64,
     stiffness: f64,
+    friction: Option<&TangentialInput>,
     with_tangent: bool,
 ) -> WallNodeElement {
     let n = normal;
@@ -117,6 +133,9 @@ pub fn wall_node_element(
         gap: g,
         pressure: t,
         tributary: 0.0,
+        traction: 0.0,
+        slip: 0.0,
+        sticking: false,
         force: [0.0; 6],
         stiffness: [[0.0; 6]; 6],
     };
@@ -140,6 +159,31 @@ pub fn wall_node_element(
                 e.stiffness[2 + i][2 + j] =
                     -stiffness * a_s * n[i] * n[j] + t * n[i] * 0.5 * (t0[j] - t1[j]);
                 e.stiffness[2 + i][4 + j] = t * n[i] * 0.5 * t1[j];
+            }
+        }
+    }
+    if let Some(input) = friction {
+        let tau = [-n[1], n[0]];
+        let slip = (x[1][0] - point[0]) * tau[0] + (x[1][1] - point[1]) * tau[1] - input.origin;
+        let c = return_map(input, slip, t);
+        e.traction = c.traction;
+        e.slip = slip;
+        e.sticking = c.sticking;
+        e.force[2] -= c.traction * a_s * tau[0];
+        e.force[3] -= c.traction * a_s * tau[1];
+        if with_tangent {
+            // dt/dx_s1: ε_T τ (stick) or mu sign(t*) (-k n) (slip).
+            let dt = [
+                c.d_slip * tau[0] - c.d_pressure * stiffness * n[0],
+                c.d_slip * tau[1] - c.d_pressure * stiffness * n[1],
+            ];
+            let tr = c.traction;
+            for (i, &tau_i) in tau.iter().enumerate() {
+                for j in 0..2 {
+                    e.stiffness[2 + i][j] -= tau_i * tr * (-0.5 * t0[j]);
+                    e.stiffness[2 + i][2 + j] -= tau_i * (a_s * dt[j] + tr * 0.5 * (t0[j] - t1[j]));
+                    e.stiffness[2 + i][4 + j] -= tau_i * tr * 0.5 * t1[j];
+                }
             }
         }
     }
@@ -174,6 +218,7 @@ pub fn add_wall_contacts(
                 wall.normal,
                 multipliers.values[w][s],
                 stiffness,
+                None,
                 tangent.is_some(),
             );
             st.gap[s] = e.gap;
@@ -249,4 +294,100 @@ pub fn contact_length(model: &DiscModel, u: &[f64], wall: &Wall, state: &WallSta
         ends[e] = se;
     }
     (ends[0] - ends[1]).abs()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A slave node s1 pressed 0.01 into a wall tilted by 0.3 rad, its neighbours unequally
+    /// spaced (so that `dA_s/dx` matters).
+    fn geometry() -> ([[f64; 2]; 3], [f64; 2], [f64; 2]) {
+        let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+        let normal = [-s, c];
+        let x = [[-0.21, 0.06], [0.02, -0.003], [0.17, 0.09]];
+        (x, [0.0, 0.0], normal)
+    }
+
+    /// Largest |analytic - central difference| of the element's force over all 6 x 6 entries,
+    /// relative to the largest entry.
+    fn tangent_error(friction: Option<&TangentialInput>) -> (f64, WallNodeElement) {
+        let (x, p, n) = geometry();
+        let (lambda, k) = (0.4, 50.0);
+        let e = wall_node_element(&x, p, n, lambda, k, friction, true);
+        let h = 1e-7;
+        let (mut worst, mut scale) = (0.0f64, 0.0f64);
+        for col in 0..6 {
+            let (mut xp, mut xm) = (x, x);
+            xp[col / 2][col % 2] += h;
+            xm[col / 2][col % 2] -= h;
+            let fp = wall_node_element(&xp, p, n, lambda, k, friction, false).force;
+            let fm = wall_node_element(&xm, p, n, lambda, k, friction, false).force;
+            for row in 0..6 {
+                let fd = (fp[row] - fm[row]) / (2.0 * h);
+                worst = worst.max((fd - e.stiffness[row][col]).abs());
+                scale = scale.max(e.stiffness[row][col].abs());
+            }
+        }
+        (worst / scale, e)
+    }
+
+    #[test]
+    fn frictional_wall_tangent_matches_finite_differences() {
+        // Expectation: the assembled tangent is the exact derivative of the force, in the stick
+        // branch (t = λ_T + ε_T Δg_T) and in the slip branch (t = mu p_N sign, depending on the
+        // current pressure: a non-symmetric tangent), to central-difference accuracy.
+        let (x, p, n) = geometry();
+        let tau = [-n[1], n[0]];
+        let g_t = (x[1][0] - p[0]) * tau[0] + (x[1][1] - p[1]) * tau[1];
+        // p_N = 0.4 + 50 x 0.01... ~ 0.9: stick with a slip of 0.001 (trial 0.1 + 0.05).
+        let stick = TangentialInput {
+            mu: 0.5,
+            penalty: 50.0,
+            lambda: 0.1,
+            origin: g_t - 0.001,
+        };
+        let (err, e) = tangent_error(Some(&stick));
+        assert!(e.sticking && e.pressure > 0.0, "{e:?}");
+        assert!((e.slip - 0.001).abs() < 1e-15);
+        assert!(err < 1e-7, "stick: relative tangent error {err:e}");
+        let slip = TangentialInput {
+            origin: g_t + 0.05,
+            ..stick
+        };
+        let (err, e) = tangent_error(Some(&slip));
+        assert!(!e.sticking, "{e:?}");
+        assert!((e.traction + 0.5 * e.pressure).abs() < 1e-15, "{e:?}");
+        assert!(err < 1e-7, "slip: relative tangent error {err:e}");
+        // The slip tangent is not symmetric: row s1 depends on the pressure's derivative.
+        let asym = (0..6)
+            .flat_map(|i| (0..6).map(move |j| (i, j)))
+            .map(|(i, j)| (e.stiffness[i][j] - e.stiffness[j][i]).abs())
+            .fold(0.0, f64::max);
+        assert!(asym > 1e-3, "slip tangent unexpectedly symmetric");
+        let (err, _) = tangent_error(None);
+        assert!(err < 1e-7, "frictionless: relative tangent error {err:e}");
+    }
+
+    #[test]
+    fn friction_force_resists_slip_and_is_bounded_by_the_cone() {
+        // Expectation: a node slipping along +τ receives a tangential force along -τ of
+        // magnitude mu T A_s, whatever the slip beyond the cone.
+        let (x, p, n) = geometry();
+        let tau = [-n[1], n[0]];
+        let g_t = (x[1][0] - p[0]) * tau[0] + (x[1][1] - p[1]) * tau[1];
+        for origin in [g_t - 0.1, g_t - 1.0] {
+            let input = TangentialInput {
+                mu: 0.3,
+                penalty: 50.0,
+                lambda: 0.0,
+                origin,
+            };
+            let e = wall_node_element(&x, p, n, 0.4, 50.0, Some(&input), false);
+            let ft = e.force[2] * tau[0] + e.force[3] * tau[1];
+            let fn_ = e.force[2] * n[0] + e.force[3] * n[1];
+            assert!((ft + 0.3 * fn_).abs() < 1e-14 * fn_, "{ft} vs {fn_}");
+            assert!((fn_ - e.pressure * e.tributary).abs() < 1e-14 * fn_);
+        }
+    }
 }

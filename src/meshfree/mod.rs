@@ -17,6 +17,7 @@
 pub mod assembly;
 pub mod contact;
 pub mod discretization;
+pub mod friction;
 pub mod material;
 pub mod model;
 pub mod nts;

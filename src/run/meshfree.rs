@@ -19,8 +19,9 @@ use rand::SeedableRng;
 use super::simulation::{RunRecord, Simulation};
 use super::{RunError, io_error};
 use crate::boundary::loading::LoadState;
-use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size, box_walls};
+use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size};
 use crate::meshfree::assembly::{Assembly, AssemblyState, Evaluation, StepStats};
+use crate::meshfree::friction::FrictionCoefficients;
 use crate::meshfree::shape::{FourierParams, StarShape, place_nodes};
 use crate::meshfree::{
     DiscNodes, GrainModel, Hyperelastic, IntegrationMesh, MeshfreeError, NodeDensity, NodeSet,
@@ -224,8 +225,8 @@ impl Meshfree {
             .map(|g| (g.shape.area() / std::f64::consts::PI).sqrt())
             .sum::<f64>()
             / grains.len() as f64;
-        let b = scenario.sample.bounds();
-        let walls = box_walls(b.x0, b.x1, b.y0, b.y1);
+        // The box's four walls, then the scenario's planes.
+        let walls = scenario.walls();
         let mut assembly = Assembly::new(
             models,
             walls,
@@ -235,6 +236,14 @@ impl Meshfree {
         )
         .map_err(|e| RunError::Setup(format!("meshfree assembly: {e}")))?;
         assembly.min_sub_step = settings.min_sub_step;
+        let friction = &scenario.contact.friction;
+        assembly
+            .set_friction(FrictionCoefficients {
+                grains: friction.grains,
+                walls: scenario.wall_friction(),
+                stiffness_ratio: friction.stiffness_ratio,
+            })
+            .map_err(|e| RunError::Setup(format!("contact: {e}")))?;
         if settings.scheme == TimeScheme::CentralDifference {
             assembly
                 .use_explicit()

@@ -5,7 +5,7 @@
 //! are not stored: [`super::meshfree::Meshfree::new`] rebuilds them, bit for bit, from the
 //! scenario (and, for a scenario that reads its sample from a file, the sample's grains, which
 //! are stored). What is stored is the dynamic state: step, time, displacements, velocities,
-//! accelerations and contact multipliers, the walls, the loading program and the run loop's
+//! accelerations, contact multipliers and friction history (tangential tractions), the walls, the loading program and the run loop's
 //! state, the last good state, and what the outputs of the next steps read from the last step:
 //! its contact elements (wall forces, contacts, penetration), its energies and its counters.
 //! Every f64 is stored as its bit pattern.
@@ -25,8 +25,8 @@ use crate::boundary::loading::LoadingProgram;
 use crate::boundary::walls::Wall;
 use crate::grain::Grain;
 use crate::meshfree::assembly::{
-    Assembly, AssemblyState, ContactElement, ContactKey, ContactMultipliers, Evaluation, Master,
-    StepStats,
+    Assembly, AssemblyState, ContactElement, ContactKey, ContactMultipliers, ElementFriction,
+    Evaluation, Master, StepStats,
 };
 use crate::meshfree::shape::{FourierMode, StarShape};
 use crate::meshfree::solver::SolveStats;
@@ -105,6 +105,24 @@ pub struct StateBits {
     pub v: Vec<Bits>,
     pub a: Vec<Bits>,
     pub multipliers: Vec<(KeyBits, Bits)>,
+    /// The friction history (tangential tractions), in key order; absent in frictionless
+    /// runs' checkpoints written before friction.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub friction: Vec<(KeyBits, Bits)>,
+}
+
+fn multipliers_bits(m: &ContactMultipliers) -> Vec<(KeyBits, Bits)> {
+    m.iter().map(|(k, &p)| (k.into(), p.into())).collect()
+}
+
+fn multipliers_of(b: &[(KeyBits, Bits)], what: &str) -> Result<ContactMultipliers, String> {
+    let mut m = ContactMultipliers::new();
+    for &(k, p) in b {
+        if m.insert(k.to_key()?, p.into()).is_some() {
+            return Err(format!("{what} {:?} given twice", k.0));
+        }
+    }
+    Ok(m)
 }
 
 impl From<&AssemblyState> for StateBits {
@@ -114,11 +132,8 @@ impl From<&AssemblyState> for StateBits {
             u: bits(&s.u),
             v: bits(&s.v),
             a: bits(&s.a),
-            multipliers: s
-                .multipliers
-                .iter()
-                .map(|(k, &p)| (k.into(), p.into()))
-                .collect(),
+            multipliers: multipliers_bits(&s.multipliers),
+            friction: multipliers_bits(&s.friction),
         }
     }
 }
@@ -131,18 +146,13 @@ impl StateBits {
                 "{n} displacements, {nv} velocities and {na} accelerations"
             ));
         }
-        let mut multipliers = ContactMultipliers::new();
-        for &(k, p) in &self.multipliers {
-            if multipliers.insert(k.to_key()?, p.into()).is_some() {
-                return Err(format!("contact multiplier {:?} given twice", k.0));
-            }
-        }
         Ok(AssemblyState {
             time: self.time.into(),
             u: floats(&self.u),
             v: floats(&self.v),
             a: floats(&self.a),
-            multipliers,
+            multipliers: multipliers_of(&self.multipliers, "contact multiplier")?,
+            friction: multipliers_of(&self.friction, "friction traction")?,
         })
     }
 }
@@ -158,6 +168,9 @@ pub struct ElementBits {
     pub point: [Bits; 2],
     pub dofs: Vec<u64>,
     pub force: Vec<Bits>,
+    /// Friction (traction, slip, sticking) of a frictional element.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction: Option<(Bits, Bits, bool)>,
 }
 
 /// An [`Evaluation`] with its floats as bits.
@@ -167,6 +180,9 @@ pub struct EvaluationBits {
     pub elements: Vec<ElementBits>,
     pub elastic_energy: Bits,
     pub force_scale: Bits,
+    /// Energy friction dissipated over the step (absent before friction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dissipation: Option<Bits>,
 }
 
 impl From<&Evaluation> for EvaluationBits {
@@ -185,10 +201,14 @@ impl From<&Evaluation> for EvaluationBits {
                     point: [e.point[0].into(), e.point[1].into()],
                     dofs: e.dofs.iter().map(|&d| d as u64).collect(),
                     force: bits(&e.force),
+                    friction: e
+                        .friction
+                        .map(|f| (f.traction.into(), f.slip.into(), f.sticking)),
                 })
                 .collect(),
             elastic_energy: e.elastic_energy.into(),
             force_scale: e.force_scale.into(),
+            dissipation: (e.dissipation != 0.0).then(|| e.dissipation.into()),
         }
     }
 }
@@ -219,6 +239,11 @@ impl EvaluationBits {
                         .map(|&d| usize::try_from(d).map_err(|_| format!("DoF {d}")))
                         .collect::<Result<_, _>>()?,
                     force: floats(&e.force),
+                    friction: e.friction.map(|(t, s, sticking)| ElementFriction {
+                        traction: t.into(),
+                        slip: s.into(),
+                        sticking,
+                    }),
                     stiffness: Vec::new(),
                 })
             })
@@ -229,6 +254,7 @@ impl EvaluationBits {
             elastic_energy: self.elastic_energy.into(),
             force_scale: self.force_scale.into(),
             grain_blocks: Vec::new(),
+            dissipation: self.dissipation.map_or(0.0, f64::from),
         })
     }
 }
@@ -582,6 +608,7 @@ impl MeshfreeCheckpoint {
         };
         for s in [&self.state, &self.last_good.1] {
             s.multipliers.keys().try_for_each(key_ok)?;
+            s.friction.keys().try_for_each(key_ok)?;
         }
         let l = &self.last;
         if !l.residual.is_empty() && l.residual.len() != dofs {

@@ -834,11 +834,12 @@ impl Scenario {
             }
             return Ok(());
         };
-        if self.tangential_ratio() > 0.0 {
+        let friction = &self.contact.friction;
+        if friction.damping != 0.0 {
             return Err(invalid(
-                "contact.friction / planes[..].friction",
-                "a non-zero coefficient",
-                "zero for model: Meshfree (its frictional contacts are not written yet)",
+                "contact.friction.damping",
+                num(friction.damping),
+                "0 for model: Meshfree (its frictional contacts have no tangential dashpot)",
             ));
         }
         if self.material.poisson >= 0.5 {

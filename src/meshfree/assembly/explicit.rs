@@ -6,10 +6,17 @@
 //! Contacts are penalty springs of stiffness `k0`, with no augmentation: a contact carrying a
 //! pressure `p` penetrates by about `p / k0`, so `k0` sets the accuracy of the contacts (and,
 //! through the critical step, the cost).
+//!
+//! Friction (walls with `mu > 0`): a tangential penalty spring of stiffness `r_t k0` per
+//! contact node with the Coulomb limit, the traction kept from sub-step to sub-step in
+//! [`AssemblyState::friction`] (the same return mapping as the implicit scheme, with the slip
+//! of one sub-step, `h` times the half-step velocity relative to the wall).
 
 use rayon::prelude::*;
 
-use super::{Assembly, AssemblyState, ContactMultipliers, Evaluation, StepStats};
+use super::{
+    Assembly, AssemblyState, ContactMultipliers, Evaluation, FrictionInput, SlipOrigin, StepStats,
+};
 use crate::meshfree::MeshfreeError;
 use crate::meshfree::model::GrainModel;
 use crate::meshfree::solver::{SolveStats, finite_residual_norm};
@@ -120,7 +127,13 @@ impl Assembly {
             }
             // `near_distance` is twice the longest contour segment.
             let segment = 0.5 * self.near_distance;
-            let omega2 = lambda_max + 4.0 * self.settings.k0 * segment / contour_mass;
+            // A tangential spring stiffer than the normal one bounds the step instead.
+            let spring = if self.friction.any() {
+                self.friction.stiffness_ratio.max(1.0)
+            } else {
+                1.0
+            };
+            let omega2 = lambda_max + 4.0 * spring * self.settings.k0 * segment / contour_mass;
             let body_force_correction = lumped_mass
                 .iter()
                 .enumerate()
@@ -135,8 +148,46 @@ impl Assembly {
         Ok(self.explicit.as_ref().expect("set above"))
     }
 
+    /// The slip origin of an explicit sub-step of `h` ending at `state.u`: the nodes at
+    /// `u - h v` (`state.v`: the half-step velocity of the sub-step), the walls `h` earlier.
+    fn explicit_slip_origin(&self, state: &AssemblyState, h: f64) -> SlipOrigin {
+        let before: Vec<f64> = state
+            .u
+            .iter()
+            .zip(&state.v)
+            .map(|(u, v)| u - h * v)
+            .collect();
+        let mut origin = self.slip_origin(&before);
+        for (p, w) in origin.wall_points.iter_mut().zip(&self.walls) {
+            p[0] -= h * w.velocity.x;
+            p[1] -= h * w.velocity.y;
+        }
+        origin
+    }
+
+    /// Evaluation at `state.u` with penalty contacts, the friction of a sub-step of `h` when
+    /// a wall has friction.
+    fn explicit_evaluation(
+        &self,
+        state: &AssemblyState,
+        h: f64,
+    ) -> Result<Evaluation, MeshfreeError> {
+        let no_multipliers = ContactMultipliers::new();
+        let k = self.settings.k0;
+        if !self.friction.any() {
+            return self.evaluate(&state.u, &no_multipliers, k, None, false);
+        }
+        let origin = self.explicit_slip_origin(state, h);
+        let input = FrictionInput {
+            tractions: &state.friction,
+            origin: &origin,
+        };
+        self.evaluate_with(&state.u, &no_multipliers, Some(input), k, None, false)
+    }
+
     /// `sub_steps` central-difference steps of `h` from `state` (walls moved from `walls0` at
-    /// their velocities); returns the deepest penetration met.
+    /// their velocities); returns the deepest penetration met and the energy friction
+    /// dissipated.
     fn central_differences(
         &mut self,
         state: &mut AssemblyState,
@@ -144,22 +195,25 @@ impl Assembly {
         walls0: &[crate::boundary::walls::Wall],
         h: f64,
         sub_steps: usize,
-    ) -> Result<f64, MeshfreeError> {
-        let no_multipliers = ContactMultipliers::new();
-        let (k, alpha) = (self.settings.k0, self.rayleigh.0);
+    ) -> Result<(f64, f64), MeshfreeError> {
+        let alpha = self.rayleigh.0;
         let mut fixed = vec![false; self.dofs()];
         for &i in &self.fixed {
             fixed[i] = true;
         }
-        let mut max_penetration = 0.0f64;
+        let (mut max_penetration, mut dissipation) = (0.0f64, 0.0);
         let (keep, gain) = (1.0 - 0.5 * alpha * h, 1.0 / (1.0 + 0.5 * alpha * h));
         // At the start of a run `state.v` is the velocity at t = 0, not at -h/2: the first
         // sub-step takes a half step from it (second-order start, exact in free fall).
         let mut start_up = state.time == 0.0;
         for s in 0..sub_steps {
             self.move_walls(walls0, s as f64 * h);
-            let eval = self.evaluate(&state.u, &no_multipliers, k, None, false)?;
+            let eval = self.explicit_evaluation(state, h)?;
             finite_residual_norm(&eval.residual)?;
+            if self.friction.any() {
+                state.friction = eval.tractions();
+                dissipation += eval.friction_dissipation();
+            }
             max_penetration = max_penetration.max(eval.max_penetration());
             // One DoF reads seven arrays: an index reads better than a seven-way zip.
             #[allow(clippy::needless_range_loop)]
@@ -182,7 +236,7 @@ impl Assembly {
             }
             start_up = false;
         }
-        Ok(max_penetration)
+        Ok((max_penetration, dissipation))
     }
 
     /// Advances `state` by `dt` in explicit sub-steps of at most
@@ -203,15 +257,11 @@ impl Assembly {
         let advanced =
             self.central_differences(state, &data, &walls0, dt / sub_steps as f64, sub_steps);
         self.explicit = Some(data);
-        let max_penetration = advanced?;
+        let (max_penetration, dissipation) = advanced?;
         self.move_walls(&walls0, dt);
-        let eval = self.evaluate(
-            &state.u,
-            &ContactMultipliers::new(),
-            self.settings.k0,
-            None,
-            false,
-        )?;
+        // The tractions of the next sub-step (not committed: that sub-step commits them).
+        let mut eval = self.explicit_evaluation(state, dt / sub_steps as f64)?;
+        eval.dissipation = dissipation;
         finite_residual_norm(&eval.residual)?;
         let max_penetration = max_penetration.max(eval.max_penetration());
         state.time += dt;
