@@ -6,10 +6,12 @@
 //! ```
 //!
 //! prints `rolling_s_sdem = ...` (mu 0.6, full level), `rolling_s_sdem_slip = ...` (mu 0.1),
-//! and `compaction30_phi_gain_with_friction = ...` (phi(mu 0.5) - phi(mu 0) at the final
-//! strain, SDEM), each on its own line, with the tables behind them.
+//! `rolling_s_meshfree = ...` (mu 0.6, the finest nodal density run) and
+//! `compaction30_phi_gain_with_friction = ...` (phi(mu 0.5) - phi(mu 0) at the final strain,
+//! SDEM), each on its own line, with the tables behind them.
 
 mod common;
+use common::rolling;
 
 use sdem::run::{RunOptions, build_world, run_scenario};
 use sdem::scenario::Scenario;
@@ -85,6 +87,34 @@ fn rolling_disc_sdem() {
     }
     println!("rolling_s_sdem = {}", full[0]);
     println!("rolling_s_sdem_slip = {}", full[1]);
+}
+
+#[test]
+#[ignore = "benchmark: the meshfree rolling disc at three nodal densities, about 2.5 minutes"]
+fn rolling_disc_meshfree() {
+    // The shipped scenario (the disc on a plane inclined at 45°) at increasing nodal density,
+    // mu = 0.6 (rolls: s -> 1/3), and at the finest density mu = 0.1 (s = 0.45) and 0 (1/2).
+    let densities = [32, 64, 128];
+    let mut last = 0.0;
+    for &nb in &densities {
+        let (s, touching, cpu) = rolling::scenario_s(nb, 0.6);
+        println!(
+            "boundary_nodes {nb:4}  mu 0.6  s = {s:.5}  touching {:.0}% of steps  {cpu:.1} s",
+            100.0 * touching
+        );
+        assert!((s - 1.0 / 3.0).abs() < 0.02, "s = {s}");
+        last = s;
+    }
+    for mu in [0.1, 0.0] {
+        let (s, touching, cpu) = rolling::scenario_s(64, mu);
+        let expected = 0.5 * (1.0 - mu / rolling::THETA.tan());
+        println!(
+            "boundary_nodes   64  mu {mu}  s = {s:.5} (expected {expected:.3})  touching {:.0}% of steps  {cpu:.1} s",
+            100.0 * touching
+        );
+        assert!((s - expected).abs() < 2e-3, "s = {s}");
+    }
+    println!("rolling_s_meshfree = {last}");
 }
 
 /// The last row of a run's macro.csv, by column name.

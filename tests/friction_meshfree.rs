@@ -6,7 +6,7 @@
 
 use glam::DVec2;
 use sdem::boundary::walls::Wall;
-use sdem::meshfree::assembly::{Assembly, AssemblyState};
+use sdem::meshfree::assembly::Assembly;
 use sdem::meshfree::friction::FrictionCoefficients;
 use sdem::meshfree::shape::StarShape;
 use sdem::meshfree::{
@@ -16,10 +16,11 @@ use sdem::meshfree::{
 use sdem::run::meshfree::{Meshfree, SampleGrain, grain_model};
 use sdem::run::meshfree_checkpoint::MeshfreeCheckpoint;
 use sdem::run::{RunError, resume_run, run_scenario};
-use sdem::scenario::{MeshfreeSettings, Model, Scenario};
-use std::path::{Path, PathBuf};
+use sdem::scenario::{MeshfreeSettings, Scenario};
+use std::path::PathBuf;
 
 mod common;
+use common::rolling::{GRAVITY, Roll, THETA, fit_s, roll, roll_with, rolling_scenario};
 use common::with_threads;
 
 /// The seed's material and disc (SPEC §11): E = 10 MPa, nu = 0.45, rho = 990 kg/m^3,
@@ -28,8 +29,6 @@ const YOUNG: f64 = 10e6;
 const POISSON: f64 = 0.45;
 const DENSITY: f64 = 990.0;
 const RADIUS: f64 = 0.5e-3;
-const GRAVITY: f64 = 10.0;
-const THETA: f64 = std::f64::consts::FRAC_PI_4;
 
 fn disc(boundary_nodes: usize, centre: [f64; 2]) -> GrainModel {
     let mut nodes: NodeSet = DiscNodes::disc(RADIUS, NodeDensity::new(boundary_nodes))
@@ -70,75 +69,9 @@ fn incline(boundary_nodes: usize, mu: f64) -> Assembly {
     a
 }
 
-/// What a run down the incline measured.
-struct Roll {
-    /// Time and distance travelled downhill by the area centroid, after each step.
-    samples: Vec<(f64, f64)>,
-    /// Energy dissipated by friction, all steps together.
-    dissipated: f64,
-    /// Steps that ended with the disc touching the incline.
-    touching: usize,
-    /// Steps that ended with a friction history (an active frictional contact).
-    with_history: usize,
-    state: AssemblyState,
-}
-
-/// `steps` Bathe steps of `dt` of grain 0 of `a`, its progress measured along `downhill`.
-fn roll(a: &mut Assembly, dt: f64, steps: usize, downhill: [f64; 2]) -> Roll {
-    roll_with(a, dt, steps, downhill, TimeScheme::Bathe)
-}
-
-/// [`roll`] with the time scheme `scheme`.
-fn roll_with(
-    a: &mut Assembly,
-    dt: f64,
-    steps: usize,
-    downhill: [f64; 2],
-    scheme: TimeScheme,
-) -> Roll {
-    let mut state = a.initial_state();
-    let (_, c0) = a.grains[0].contour_area_centroid(&state.u);
-    let mut out = Roll {
-        samples: Vec::with_capacity(steps),
-        dissipated: 0.0,
-        touching: 0,
-        with_history: 0,
-        state: state.clone(),
-    };
-    for _ in 0..steps {
-        let (eval, _) = a.step(&mut state, dt, scheme).unwrap();
-        out.dissipated += eval.dissipation;
-        out.touching += usize::from(!eval.elements.is_empty());
-        out.with_history += usize::from(!state.friction.is_empty());
-        let (_, c) = a.grains[0].contour_area_centroid(&state.u);
-        let d = (c[0] - c0[0]) * downhill[0] + (c[1] - c0[1]) * downhill[1];
-        out.samples.push((state.time, d));
-    }
-    out.state = state;
-    out
-}
-
 /// Mass per unit thickness of the disc.
 fn disc_mass() -> f64 {
     DENSITY * std::f64::consts::PI * RADIUS * RADIUS
-}
-
-/// `s = c / (g sin θ)` of the least-squares fit `x = x0 + c t^2` over the samples with
-/// `t >= from`.
-fn fit_s(samples: &[(f64, f64)], from: f64) -> f64 {
-    let pts: Vec<(f64, f64)> = samples
-        .iter()
-        .filter(|(t, _)| *t >= from)
-        .map(|&(t, x)| (t * t, x))
-        .collect();
-    let n = pts.len() as f64;
-    let (mx, my) = (
-        pts.iter().map(|p| p.0).sum::<f64>() / n,
-        pts.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    sxy / sxx / (GRAVITY * THETA.sin())
 }
 
 /// A coarse disc (24 contour nodes) for 10 ms (100 steps of 0.1 ms): the fit from 2 ms.
@@ -176,7 +109,7 @@ fn rolling_disc_does_not_slip() {
     // the wall (node-to-wall elements): it rocks from node to node and, undamped, hops at each
     // landing (a landing node slips a little), so s is 1/3 only to the faceting's error,
     // measured 0.3454 here over 10 ms (0.332 to 0.336 over 20 ms at 24 to 128 nodes,
-    // `rolling_meshfree_benchmark`): the band 1/3 ± 0.02 tells rolling from slipping (0.45)
+    // tests/friction_benchmarks.rs `rolling_disc_meshfree`): the band 1/3 ± 0.02 tells rolling from slipping (0.45)
     // and sliding (0.5); friction dissipates a small part of the potential energy released
     // (6% measured here; a disc slipping at mu = 0.1 dissipates mu / tan θ = 10% of it).
     let (s, r) = coarse_s(0.6);
@@ -403,69 +336,6 @@ fn bad_friction_is_refused() {
         let e = a.set_friction(f).unwrap_err().to_string();
         assert!(e.contains(expect), "{e}");
     }
-}
-
-/// The shipped scenario (mu 0.6 on the incline), `boundary_nodes` and the plane's `mu` as
-/// given, run until `until` seconds.
-fn rolling_scenario(boundary_nodes: usize, mu: f64, until: f64) -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/rolling_disc_meshfree.ron");
-    let (mut s, _) = Scenario::load(&path).unwrap();
-    if let Model::Meshfree(m) = &mut s.model {
-        m.boundary_nodes = boundary_nodes;
-    }
-    s.planes[0].friction = mu;
-    s.loading = vec![sdem::boundary::loading::Phase::Relax {
-        until: sdem::boundary::loading::StopWhen::Time(until),
-    }];
-    s.validate().unwrap();
-    s
-}
-
-/// s of the shipped scenario at `boundary_nodes` with the plane's `mu`, over 20 ms; the
-/// fraction of steps touching the plane and the CPU time.
-fn scenario_s(boundary_nodes: usize, mu: f64) -> (f64, f64, f64) {
-    let t0 = std::time::Instant::now();
-    let s = rolling_scenario(boundary_nodes, mu, 0.02);
-    let mut sim = Meshfree::new(&s).unwrap();
-    let dt = match s.time_step {
-        sdem::scenario::TimeStep::Fixed(dt) => dt,
-        _ => unreachable!(),
-    };
-    let h = std::f64::consts::FRAC_1_SQRT_2;
-    let r = roll(&mut sim.assembly, dt, 200, [h, -h]);
-    (
-        fit_s(&r.samples, 2e-3),
-        r.touching as f64 / r.samples.len() as f64,
-        t0.elapsed().as_secs_f64(),
-    )
-}
-
-#[test]
-#[ignore]
-fn rolling_meshfree_benchmark() {
-    // The shipped scenario (the disc on a plane inclined at 45°) at increasing nodal density,
-    // mu = 0.6 (rolls: s -> 1/3), and at the finest density mu = 0.1 (s = 0.45) and 0 (1/2).
-    let densities = [32, 64, 128];
-    let mut last = 0.0;
-    for &nb in &densities {
-        let (s, touching, cpu) = scenario_s(nb, 0.6);
-        println!(
-            "boundary_nodes {nb:4}  mu 0.6  s = {s:.5}  touching {:.0}% of steps  {cpu:.1} s",
-            100.0 * touching
-        );
-        assert!((s - 1.0 / 3.0).abs() < 0.02, "s = {s}");
-        last = s;
-    }
-    for mu in [0.1, 0.0] {
-        let (s, touching, cpu) = scenario_s(64, mu);
-        let expected = 0.5 * (1.0 - mu / THETA.tan());
-        println!(
-            "boundary_nodes   64  mu {mu}  s = {s:.5} (expected {expected:.3})  touching {:.0}% of steps  {cpu:.1} s",
-            100.0 * touching
-        );
-        assert!((s - expected).abs() < 2e-3, "s = {s}");
-    }
-    println!("rolling_s_meshfree = {last}");
 }
 
 fn temp_dir(name: &str) -> PathBuf {

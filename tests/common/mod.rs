@@ -5,6 +5,7 @@
 
 pub mod mcap;
 pub mod meshfree;
+pub mod rolling;
 
 use sdem::grain::Grain;
 use sdem::run::checkpoint::Checkpoint;
