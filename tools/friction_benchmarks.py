@@ -2,6 +2,8 @@
 """The friction benchmarks of the frictional soft-particle paper (seed 002 §5; issue #15), SDEM.
 
 Runs, from the shipped scenarios (finished runs are kept and skipped):
+- SDEM beside the 2D Hertz benchmark: the seed's disc between two plates, F(d) against
+  Johnson's plane-strain law (the meshfree convergence is tests/friction_meshfree.rs);
 - the rolling disc (rolling_disc.ron): s = (x - x0)/(g t^2 sin theta) at t = 20 ms against the
   contour resolution dbeta and the model level (mu = 0.6), and with mu = 0.1 and 0;
 - the 30-disc compaction (compaction30_mu0.ron, compaction30_mu05.ron), quasi-static and at the
@@ -10,7 +12,7 @@ Runs, from the shipped scenarios (finished runs are kept and skipped):
 - samples A and B with mu = 0.5 between the grains (isotropic_{A,B}_friction.ron) beside the
   frictionless scenarios: the jamming point and p_c(phi).
 
-Writes rolling.csv, compaction30.csv, samples.csv and the charts compaction30.svg and
+Writes hertz.csv, rolling.csv, compaction30.csv, samples.csv and the charts compaction30.svg and
 samples.svg in --out, and prints the tables. Stdlib only.
 
     python3 tools/friction_benchmarks.py --out out/friction [--sdem target/release/sdem]
@@ -153,6 +155,58 @@ def compaction(a, out):
     (out / "compaction30.svg").write_text("\n".join(svg))
 
 
+HERTZ = """Scenario(
+    name: "hertz_sdem",
+    sample: (box_width: 0.002, box_height: 0.001, file: "hertz_disc.csv"),
+    material: (young: 1e7, poisson: 0.45, density: 990.0),
+    model: Full,
+    contact: (resolution_deg: 0.25),
+    deformation: (damping: 2e5),
+    time_step: FractionOfCritical(0.4),
+    loading: [Uniaxial(rate: Constant(5.0), until: VerticalStrain(0.05))],
+    output: (every: 200),
+)
+"""
+
+
+def hertz(a, out):
+    """SDEM beside the 2D Hertz benchmark: the seed's disc between two plates (the box's top
+    and bottom walls, the top one moving down quasi-statically), F against the approach d of
+    each plate; Johnson's plane-strain cylinder law (SPEC §11), and the secant law on a rigid
+    circle overlapped by d (what the rigid level would give)."""
+    young, nu, radius, a_law = 1e7, 0.45, 5e-4, 0.58
+    e_star = young / (1 - nu * nu)
+
+    def johnson(d):
+        f = 0.1 * e_star * d
+        for _ in range(200):
+            b = math.sqrt(4 * f * radius / (math.pi * e_star))
+            f = d * math.pi * e_star / (2 * math.log(4 * radius / b) - 1)
+        return f
+
+    def law(d):
+        chord = 2 * math.sqrt(2 * radius * d - d * d)
+        return young * chord * d / (a_law * chord - d)
+
+    run_dir = out / "hertz" / "sdem_full"
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    (run_dir.parent / "hertz_disc.csv").write_text("x,y,radius\n0.001,0.0005,0.0005\n")
+    run_text(a.sdem, run_dir, HERTZ, 1)
+    pts = [((1e-3 - float(r["box_height"])) / 2 / radius, float(r["syy_c"]) * float(r["box_width"]))
+           for r in rows_of(run_dir)]
+    rows = []
+    for ratio in [0.002, 0.004, 0.01, 0.02, 0.05]:
+        f_sdem = next((p0[1] + (ratio - p0[0]) / (p1[0] - p0[0]) * (p1[1] - p0[1])
+                       for p0, p1 in zip(pts, pts[1:]) if p0[0] <= ratio <= p1[0]), float("nan"))
+        d = ratio * radius
+        fj = johnson(d)
+        rows.append({"d_over_R": ratio, "F_Johnson_over_ER": f"{fj / (young * radius):.4e}",
+                     "sdem_full_over_Johnson": f"{f_sdem / fj:.3f}",
+                     "law_rigid_circle_over_Johnson": f"{law(d) / fj:.3f}"})
+    write_csv(out / "hertz.csv", rows)
+    print_table("2D Hertz: SDEM beside Johnson's law (per unit thickness)", rows)
+
+
 def p_at(rows, phi):
     """p_c where the compaction first reaches phi (linear in log p between rows)."""
     prev = None
@@ -226,14 +280,15 @@ def main():
     ap.add_argument("--sdem", default=str(ROOT / "target" / "release" / "sdem"))
     ap.add_argument("--threads", type=int, default=2, help="threads of the sample runs")
     ap.add_argument("--prepare", action="store_true")
-    ap.add_argument("--only", choices=["rolling", "compaction", "samples"])
+    ap.add_argument("--only", choices=["hertz", "rolling", "compaction", "samples"])
     a = ap.parse_args()
     if a.prepare:
         prepare(a)
         return
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name, f in [("rolling", rolling), ("compaction", compaction), ("samples", samples)]:
+    for name, f in [("hertz", hertz), ("rolling", rolling), ("compaction", compaction),
+                    ("samples", samples)]:
         if a.only in (None, name):
             f(a, out)
 
