@@ -20,6 +20,8 @@
 //! In the stick state the augmentations enforce `Δg_T = 0` (Uzawa on the stick constraint:
 //! `λ_T <- t`); in the slip state `Δg_T` is the physical slip of the step.
 
+use crate::contact::friction::MAX_STIFFNESS_RATIO;
+
 /// Coulomb coefficients of an assembly's contacts and the tangential penalty ratio.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrictionCoefficients {
@@ -57,8 +59,10 @@ impl FrictionCoefficients {
             ));
         }
         let r = self.stiffness_ratio;
-        if !(r > 0.0 && r <= 10.0) {
-            return Err(format!("friction stiffness_ratio {r}: must lie in (0, 10]"));
+        if !(r > 0.0 && r <= MAX_STIFFNESS_RATIO) {
+            return Err(format!(
+                "friction stiffness_ratio {r}: must lie in (0, {MAX_STIFFNESS_RATIO}]"
+            ));
         }
         Ok(())
     }
