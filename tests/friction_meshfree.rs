@@ -9,10 +9,7 @@ use sdem::boundary::walls::Wall;
 use sdem::meshfree::assembly::Assembly;
 use sdem::meshfree::friction::FrictionCoefficients;
 use sdem::meshfree::shape::StarShape;
-use sdem::meshfree::{
-    DiscNodes, GrainModel, Hyperelastic, HyperelasticLaw, NodeDensity, NodeSet, SolverSettings,
-    TimeScheme,
-};
+use sdem::meshfree::{GrainModel, Hyperelastic, HyperelasticLaw, SolverSettings, TimeScheme};
 use sdem::run::meshfree::{Meshfree, SampleGrain, grain_model};
 use sdem::run::meshfree_checkpoint::MeshfreeCheckpoint;
 use sdem::run::{RunError, resume_run, run_scenario};
@@ -31,15 +28,8 @@ const DENSITY: f64 = 990.0;
 const RADIUS: f64 = 0.5e-3;
 
 fn disc(boundary_nodes: usize, centre: [f64; 2]) -> GrainModel {
-    let mut nodes: NodeSet = DiscNodes::disc(RADIUS, NodeDensity::new(boundary_nodes))
-        .unwrap()
-        .into();
-    for p in &mut nodes.positions {
-        p[0] += centre[0];
-        p[1] += centre[1];
-    }
     let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, YOUNG, POISSON, DENSITY).unwrap();
-    GrainModel::from_nodes(nodes, material).unwrap()
+    common::meshfree::disc_of(RADIUS, centre, boundary_nodes, material)
 }
 
 fn settings() -> SolverSettings {

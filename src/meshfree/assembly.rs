@@ -108,6 +108,17 @@ pub struct ElementFriction {
     pub sticking: bool,
 }
 
+impl ElementFriction {
+    /// The friction state of an element evaluated with `tangential` (None: frictionless).
+    fn of<T>(tangential: Option<&T>, traction: f64, slip: f64, sticking: bool) -> Option<Self> {
+        tangential.map(|_| Self {
+            traction,
+            slip,
+            sticking,
+        })
+    }
+}
+
 /// An evaluated, active contact element.
 #[derive(Debug, Clone)]
 pub struct ContactElement {
@@ -709,13 +720,8 @@ impl Assembly {
                     &e.force,
                     with_tangent.then_some(&e.stiffness),
                 );
-                if tangential.is_some() {
-                    element.friction = Some(ElementFriction {
-                        traction: e.traction,
-                        slip: e.slip,
-                        sticking: e.sticking,
-                    });
-                }
+                element.friction =
+                    ElementFriction::of(tangential.as_ref(), e.traction, e.slip, e.sticking);
                 out.push(element);
             }
         }
@@ -761,13 +767,8 @@ impl Assembly {
                     &e.force,
                     with_tangent.then_some(&e.stiffness),
                 );
-                if tangential.is_some() {
-                    element.friction = Some(ElementFriction {
-                        traction: e.traction,
-                        slip: e.slip,
-                        sticking: e.sticking,
-                    });
-                }
+                element.friction =
+                    ElementFriction::of(tangential.as_ref(), e.traction, e.slip, e.sticking);
                 out.push(element);
             }
         }

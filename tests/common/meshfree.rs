@@ -14,14 +14,25 @@ pub const RADIUS: f64 = 0.5;
 /// A disc of radius [`RADIUS`] with `boundary_nodes` boundary nodes, centred on `centre`, of a
 /// neo-Hookean material with E = 1, Poisson's ratio `nu` and density 1.
 pub fn disc_at(centre: [f64; 2], boundary_nodes: usize, nu: f64) -> GrainModel {
-    let mut nodes: NodeSet = DiscNodes::disc(RADIUS, NodeDensity::new(boundary_nodes))
+    let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, 1.0, nu, 1.0).unwrap();
+    disc_of(RADIUS, centre, boundary_nodes, material)
+}
+
+/// A disc of radius `radius` with `boundary_nodes` boundary nodes, centred on `centre`, of
+/// `material`.
+pub fn disc_of(
+    radius: f64,
+    centre: [f64; 2],
+    boundary_nodes: usize,
+    material: Hyperelastic,
+) -> GrainModel {
+    let mut nodes: NodeSet = DiscNodes::disc(radius, NodeDensity::new(boundary_nodes))
         .unwrap()
         .into();
     for p in &mut nodes.positions {
         p[0] += centre[0];
         p[1] += centre[1];
     }
-    let material = Hyperelastic::new(HyperelasticLaw::NeoHookean, 1.0, nu, 1.0).unwrap();
     GrainModel::from_nodes(nodes, material).unwrap()
 }
 
