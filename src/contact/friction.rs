@@ -16,6 +16,14 @@ use serde::{Deserialize, Serialize};
 /// Largest allowed tangential-to-normal stiffness ratio `r_t`.
 pub const MAX_STIFFNESS_RATIO: f64 = 10.0;
 
+/// What a Coulomb coefficient may be, for error messages.
+pub const COEFFICIENT_RANGE: &str = "a finite number >= 0 (0: frictionless)";
+
+/// Whether `mu` is a valid Coulomb coefficient.
+pub fn is_coefficient(mu: f64) -> bool {
+    mu.is_finite() && mu >= 0.0
+}
+
 /// Friction of a scenario: Coulomb coefficients and the tangential spring and dashpot.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -50,11 +58,6 @@ impl FrictionSettings {
         *self == Self::default()
     }
 
-    /// Frictionless between grains and at the box walls.
-    pub fn is_frictionless(&self) -> bool {
-        self.grains == 0.0 && self.box_walls().iter().all(|&mu| mu == 0.0)
-    }
-
     /// The coefficients of the four box walls (left, right, bottom, top).
     pub fn box_walls(&self) -> [f64; 4] {
         self.each_wall.unwrap_or([self.walls; 4])
@@ -62,20 +65,19 @@ impl FrictionSettings {
 
     /// The first field out of its range: (field, value, allowed range).
     pub fn check(&self) -> Result<(), (&'static str, f64, &'static str)> {
-        let coefficient = "a finite number >= 0 (0: frictionless)";
-        if !(self.grains.is_finite() && self.grains >= 0.0) {
-            return Err(("grains", self.grains, coefficient));
+        if !is_coefficient(self.grains) {
+            return Err(("grains", self.grains, COEFFICIENT_RANGE));
         }
-        if !(self.walls.is_finite() && self.walls >= 0.0) {
-            return Err(("walls", self.walls, coefficient));
+        if !is_coefficient(self.walls) {
+            return Err(("walls", self.walls, COEFFICIENT_RANGE));
         }
         if let Some(&mu) = self
             .each_wall
             .iter()
             .flatten()
-            .find(|mu| !(mu.is_finite() && **mu >= 0.0))
+            .find(|mu| !is_coefficient(**mu))
         {
-            return Err(("each_wall", mu, coefficient));
+            return Err(("each_wall", mu, COEFFICIENT_RANGE));
         }
         if !(self.stiffness_ratio > 0.0 && self.stiffness_ratio <= MAX_STIFFNESS_RATIO) {
             return Err(("stiffness_ratio", self.stiffness_ratio, "in (0, 10]"));

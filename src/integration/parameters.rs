@@ -61,8 +61,8 @@ impl Friction {
         })
     }
 
-    /// `r_t` for the critical time step.
-    pub fn stiffness_ratio(friction: &Option<Self>) -> f64 {
+    /// `r_t` of a world's contacts for the critical time step, 0 without friction.
+    pub fn tangential_ratio(friction: &Option<Self>) -> f64 {
         friction.map_or(0.0, |f| f.law.stiffness_ratio)
     }
 }

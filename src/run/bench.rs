@@ -15,6 +15,9 @@ use glam::DVec2;
 use rand::SeedableRng;
 use std::time::Instant;
 
+/// The lattice spacing s of the packing.
+const SPACING: f64 = 0.024;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BenchResult {
     pub grains: usize,
@@ -34,7 +37,7 @@ impl BenchResult {
 
 /// A dense packing of about `grains` grains (rounded to full lattice rows).
 pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
-    let spacing = 0.024;
+    let spacing = SPACING;
     let columns = (grains as f64).sqrt().ceil().max(2.0) as usize;
     let rows = grains.div_ceil(columns).max(2);
     let row_height = spacing * 3f64.sqrt() / 2.0;
@@ -77,14 +80,13 @@ pub fn with_friction(world: &mut World, mu: f64) {
     };
     let p = &mut world.params;
     p.friction = Friction::new(&settings, &vec![mu; world.walls.len()]);
-    let spacing = 0.024;
     p.dt = 0.4
         * frictional_critical_time_step(
             &p.material,
             &p.law,
-            0.5 * spacing,
+            0.5 * SPACING,
             p.level,
-            Friction::stiffness_ratio(&p.friction),
+            Friction::tangential_ratio(&p.friction),
         );
 }
 

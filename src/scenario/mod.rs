@@ -12,7 +12,7 @@
 use crate::boundary::loading::{Phase, StopWhen, StrainRate};
 use crate::boundary::walls::{Wall, box_walls};
 use crate::contact::SecantLaw;
-use crate::contact::friction::FrictionSettings;
+use crate::contact::friction::{COEFFICIENT_RANGE, FrictionSettings, is_coefficient};
 use crate::grain::Grain;
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
@@ -1143,11 +1143,11 @@ impl Scenario {
                     "a finite vector of non-zero length, pointing to the grains' side",
                 ));
             }
-            if !(plane.friction.is_finite() && plane.friction >= 0.0) {
+            if !is_coefficient(plane.friction) {
                 return Err(invalid(
                     &format!("planes[{k}].friction"),
                     num(plane.friction),
-                    "a finite number >= 0 (0: frictionless)",
+                    COEFFICIENT_RANGE,
                 ));
             }
         }
@@ -1176,16 +1176,15 @@ impl Scenario {
         mu
     }
 
+    /// The friction of the run's contacts (`None` when every coefficient is zero).
+    pub fn friction(&self) -> Option<Friction> {
+        Friction::new(&self.contact.friction, &self.wall_friction())
+    }
+
     /// `r_t` of the scenario's frictional contacts, 0 when every contact is frictionless (it
     /// enters the critical time step).
     pub fn tangential_ratio(&self) -> f64 {
-        let frictional = !self.contact.friction.is_frictionless()
-            || self.planes.iter().any(|p| p.friction > 0.0);
-        if frictional {
-            self.contact.friction.stiffness_ratio
-        } else {
-            0.0
-        }
+        Friction::tangential_ratio(&self.friction())
     }
 
     /// The periodic cell's checks: SDEM only; a cell at least twice the interaction range wide;
@@ -1438,7 +1437,7 @@ impl Scenario {
             alpha_mass_scale: self.deformation.alpha_mass_scale,
             dt: self.time_step_value(),
             skin_fraction: self.contact.skin,
-            friction: Friction::new(&self.contact.friction, &self.wall_friction()),
+            friction: self.friction(),
             gravity: DVec2::new(self.gravity.0, self.gravity.1),
         }
     }
