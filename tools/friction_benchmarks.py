@@ -126,20 +126,49 @@ def compaction(a, out):
                          "true_strain": f"{last[0]:.4f}", "phi": f"{last[1]:.5f}",
                          "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}",
                          "cpu_s": f"{cpu:.2f}"})
+    gain = float(rows[3]["phi"]) - float(rows[0]["phi"])
+    # The meshfree solver at the same wall speed (5 m/s), for each nodal density asked.
+    with open(SCENARIOS / "compaction30_meshfree_grains.csv") as f:
+        radii = [float(r["radius"]) for r in csv.DictReader(f)]
+    for nodes in a.meshfree_nodes:
+        # Vs0: the undeformed contour polygons (phi is measured on the contour polygons).
+        polygon_area = sum(0.5 * nodes * r * r * math.sin(2 * math.pi / nodes) for r in radii)
+        for mu in ["0", "05"]:
+            text = (SCENARIOS / f"compaction30_meshfree_mu{mu}.ron").read_text()
+            text = text.replace("boundary_nodes: 32,", f"boundary_nodes: {nodes},")
+            run_dir = out / "compaction30" / f"meshfree{nodes}_mu{mu}"
+            cpu = run(a.sdem, run_dir, text, ["compaction30_meshfree_grains.csv"])
+            pts = []
+            for r in rows_of(run_dir):
+                h, phi, syy = float(r["box_height"]), float(r["phi"]), float(r["syy_c"])
+                pts.append((-math.log(h / height), phi, syy,
+                            math.log(phi * width * h / polygon_area)))
+            kind = f"meshfree {nodes} nodes, 5 m/s"
+            curves[(mu, kind)] = pts
+            last = pts[-1]
+            rows.append({"mu": "0.5" if mu == "05" else "0", "loading": kind,
+                         "true_strain": f"{last[0]:.4f}", "phi": f"{last[1]:.5f}",
+                         "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}",
+                         "cpu_s": f"{cpu:.2f}"})
+        print(f"compaction30_phi_gain_with_friction_meshfree{nodes} = "
+              f"{float(rows[-1]['phi']) - float(rows[-2]['phi'])}")
     write_csv(out / "compaction30.csv", rows)
     print_table("30-disc compaction, at the final box (30% vertical strain; 40% for the deep runs)",
                 rows)
-    gain = float(rows[3]["phi"]) - float(rows[0]["phi"])
     print(f"compaction30_phi_gain_with_friction = {gain}")
-    labels = {k: f"mu = {'0.5' if k[0] == '05' else '0'}, {k[1]}" for k in curves}
-    colours = {k: "#c33" if k[0] == "05" else "#36c" for k in curves}
+    labels = {k: f"mu = {'0.5' if k[0] == '05' else '0'}, {'SDEM, ' * (k[1][0] != 'm')}{k[1]}"
+              for k in curves}
+    meshfree = {k: k[1].startswith("meshfree") for k in curves}
+    colours = {k: ("#e80" if meshfree[k] else "#c33") if k[0] == "05"
+               else ("#0a8" if meshfree[k] else "#36c") for k in curves}
     keys = [k for k in curves if k[1] != "quasi-static to 40%"]
-    dashes = ["" if k[1] == "quasi-static" else "5,3" for k in keys]
+    dashes = ["" if k[1] == "quasi-static" or k[1].startswith("meshfree 32 ") else
+              "2,2" if meshfree[k] else "5,3" for k in keys]
     deep = [k for k in curves if k[1] == "quasi-static to 40%"]
     svg = ['<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="470" '
            'font-family="sans-serif" font-size="12">',
            '<text x="500" y="20" text-anchor="middle" font-size="15">30 discs compacted by the top '
-           'wall (E = 10 MPa, nu = 0.45), SDEM</text>']
+           'wall (E = 10 MPa, nu = 0.45), SDEM and meshfree</text>']
     loaded = {k: [p for p in curves[k] if p[2] > 1e3] for k in keys}
     svg += panel(90, 60, 370, 340, [[math.log10(p[2]) for p in loaded[k]] for k in keys],
                  [[p[1] for p in loaded[k]] for k in keys], [colours[k] for k in keys],
@@ -266,12 +295,20 @@ def prepare(a):
         g.write("x,y,radius\n")
         for r in csv.DictReader(f):
             g.write(f"{r['x']},{r['y']},{r['radius']}\n")
+    # The meshfree runs' packing: the same, each radius times 0.998 (meshfree grains may not
+    # overlap at the start; SDEM's just-jammed packing overlaps by ~1e-3 R).
+    with open(out / "grains.csv") as f, open(SCENARIOS / "compaction30_meshfree_grains.csv",
+                                               "w") as g:
+        g.write("x,y,radius\n")
+        for r in csv.DictReader(f):
+            g.write(f"{r['x']},{r['y']},{float(r['radius']) * 0.998!r}\n")
     height = rows_of(out)[-1]["box_height"]
-    print(f"wrote scenarios/compaction30_grains.csv; box height {height}")
-    for mu in ["0", "05"]:
-        text = (SCENARIOS / f"compaction30_mu{mu}.ron").read_text()
+    print(f"wrote scenarios/compaction30_grains.csv and compaction30_meshfree_grains.csv; "
+          f"box height {height}")
+    for name in ["mu0", "mu05", "meshfree_mu0", "meshfree_mu05"]:
+        text = (SCENARIOS / f"compaction30_{name}.ron").read_text()
         if f"box_height: {height}," not in text:
-            print(f"  compaction30_mu{mu}.ron: set box_height: {height}")
+            print(f"  compaction30_{name}.ron: set box_height: {height}")
 
 
 def main():
@@ -281,6 +318,9 @@ def main():
     ap.add_argument("--threads", type=int, default=2, help="threads of the sample runs")
     ap.add_argument("--prepare", action="store_true")
     ap.add_argument("--only", choices=["hertz", "rolling", "compaction", "samples"])
+    ap.add_argument("--meshfree-nodes", type=lambda s: [int(n) for n in s.split(",") if n],
+                    default=[32], help="contour nodes of the meshfree 30-disc compactions "
+                    "(comma-separated; '' for none)")
     a = ap.parse_args()
     if a.prepare:
         prepare(a)

@@ -49,6 +49,19 @@ const REUSE_CONTRACTION: f64 = 0.1;
 /// it, and the next augmentation starts from the iterate.
 const EARLY_AUGMENTATION_STEP: f64 = 0.05;
 
+/// Full Newton steps in a row that do not lower the residual below [`STALL_CONTRACTION`] of
+/// the lowest so far before the steps are shortened: Newton then cycles between two sides of
+/// a kink of the residual (a frictional contact switching between stick and slip, or one
+/// opening and closing), each linearisation sending the iterate to the other side.
+const STALLED_STEPS_BEFORE_LINE_SEARCH: usize = 2;
+
+/// A full Newton step that does not bring the residual below this fraction of the lowest
+/// residual of its loop is stalled.
+const STALL_CONTRACTION: f64 = 0.9;
+
+/// Halvings of a stalled Newton step tried before the full step is kept.
+const LINE_SEARCH_HALVINGS: usize = 8;
+
 /// How a Newton loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum NewtonEnd {
@@ -1002,7 +1015,11 @@ impl Assembly {
     /// changes, and a residual with a solve costs a fraction of a tangent with its
     /// factorization. A modified step that does not reduce the residual is undone and redone
     /// with the tangent. The convergence test needs the residual only: the tangent is
-    /// computed only when a full step follows.
+    /// computed only when a full step follows. After [`STALLED_STEPS_BEFORE_LINE_SEARCH`] full
+    /// steps in a row that leave the residual above [`STALL_CONTRACTION`] of the lowest so far
+    /// (Newton cycling), the step is shortened until the residual falls
+    /// ([`Assembly::shorter_newton_step`]); a Newton whose residual keeps falling never gets
+    /// there.
     #[allow(clippy::too_many_arguments)]
     fn newton(
         &mut self,
@@ -1024,6 +1041,9 @@ impl Assembly {
         let mut last_correction = f64::INFINITY;
         // The iterate before a modified step, to undo it if it fails.
         let mut before_modified: Option<(Vec<f64>, Evaluation, f64)> = None;
+        // Full steps in a row that did not lower the residual well below the lowest so far.
+        let mut stalled_steps = 0;
+        let mut lowest_norm = norm;
         for _ in 0..self.settings.max_newton {
             if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
                 return Ok((eval, NewtonEnd::Converged));
@@ -1059,11 +1079,40 @@ impl Assembly {
                 stats.factorizations += 1;
                 factorized = true;
             }
-            let applied = newton_update(u, &du, |trial| self.all_points_valid(trial))?;
-            last_correction = applied * du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let start = (!reuse).then(|| u.clone());
+            let mut applied = newton_update(u, &du, |trial| self.all_points_valid(trial))?;
             previous_norm = norm;
             eval = self.evaluate_with(u, multipliers, friction, k, dynamic, false)?;
             norm = finite_residual_norm(&eval.residual)?;
+            if let Some(start) = start {
+                stalled_steps = if norm < STALL_CONTRACTION * lowest_norm {
+                    0
+                } else {
+                    stalled_steps + 1
+                };
+                lowest_norm = lowest_norm.min(norm);
+                if stalled_steps >= STALLED_STEPS_BEFORE_LINE_SEARCH {
+                    if let Some((alpha, shorter, shorter_eval, shorter_norm)) = self
+                        .shorter_newton_step(
+                            &start,
+                            &du,
+                            applied,
+                            previous_norm,
+                            multipliers,
+                            friction,
+                            k,
+                            dynamic,
+                        )?
+                    {
+                        *u = shorter;
+                        eval = shorter_eval;
+                        norm = shorter_norm;
+                        applied = alpha;
+                        stalled_steps = 0;
+                    }
+                }
+            }
+            last_correction = applied * du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         }
         if norm <= self.settings.force_tolerance + 1e-13 * eval.force_scale {
             return Ok((eval, NewtonEnd::Converged));
@@ -1072,6 +1121,39 @@ impl Assembly {
             "Newton did not converge in {} iterations (residual {norm:.3e} > {:.1e})",
             self.settings.max_newton, self.settings.force_tolerance
         )))
+    }
+
+    /// Backtracking along a full Newton step that left the residual no lower, after
+    /// [`STALLED_STEPS_BEFORE_LINE_SEARCH`] such steps: `start + alpha du` for alpha =
+    /// applied/2, applied/4, … ([`LINE_SEARCH_HALVINGS`] tries), the first valid one whose
+    /// residual is below `norm_at_start`, with its evaluation and residual norm; `None` when
+    /// none is (the full step is then kept, as without the search).
+    #[allow(clippy::too_many_arguments)]
+    fn shorter_newton_step(
+        &self,
+        start: &[f64],
+        du: &[f64],
+        applied: f64,
+        norm_at_start: f64,
+        multipliers: &ContactMultipliers,
+        friction: Option<FrictionInput<'_>>,
+        k: f64,
+        dynamic: Option<&DynamicTerms>,
+    ) -> Result<Option<(f64, Vec<f64>, Evaluation, f64)>, MeshfreeError> {
+        let mut alpha = applied;
+        for _ in 0..LINE_SEARCH_HALVINGS {
+            alpha *= 0.5;
+            let trial: Vec<f64> = start.iter().zip(du).map(|(u, d)| u + alpha * d).collect();
+            if !self.all_points_valid(&trial) {
+                continue;
+            }
+            let eval = self.evaluate_with(&trial, multipliers, friction, k, dynamic, false)?;
+            match finite_residual_norm(&eval.residual) {
+                Ok(norm) if norm < norm_at_start => return Ok(Some((alpha, trial, eval, norm))),
+                _ => {}
+            }
+        }
+        Ok(None)
     }
 
     /// Newton loops nested in augmentation loops (k reset to k0, doubled at each
