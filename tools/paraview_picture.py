@@ -9,14 +9,15 @@ docs/visualisation.md do in the ParaView window.)
 import os
 import sys
 
-from paraview.simple import (ColorBy, GetColorTransferFunction, PVDReader, ResetCamera,
-                             SaveScreenshot, Show, CreateView, Render)
+from paraview.simple import (ColorBy, CreateView, GetColorTransferFunction,
+                             GetOpacityTransferFunction, GetScalarBar,
+                             PVDReader, Render, ResetCamera, SaveScreenshot, Show)
 
 d, out = sys.argv[1], sys.argv[2]
 size = int(sys.argv[3]) if len(sys.argv) > 3 else 900
 
 view = CreateView("RenderView")
-view.ViewSize = [size, size]
+view.ViewSize = [int(1.25 * size), size]
 view.OrientationAxesVisibility = 0
 view.Background = [1, 1, 1]
 try:  # ParaView >= 5.10 uses a palette unless told otherwise
@@ -36,25 +37,43 @@ lut = GetColorTransferFunction("mean_stress_c")
 lut.ApplyPreset("Viridis (matplotlib)", True)
 g.RescaleTransferFunctionToDataRange(False, True)
 g.SetScalarBarVisibility(view, True)
-bar = lut.GetScalarBar(view) if hasattr(lut, "GetScalarBar") else None
-if bar is not None:
-    bar.Title = "mean stress (compression +)"
+
+
+def style_bar(lut, title, position):
+    bar = GetScalarBar(lut, view)
+    bar.Title = title
     bar.ComponentTitle = ""
     bar.TitleColor = [0, 0, 0]
     bar.LabelColor = [0, 0, 0]
+    bar.TitleFontSize = 14
+    bar.LabelFontSize = 12
+    bar.RangeLabelFormat = "%-#6.2g"
+    bar.WindowLocation = "Any Location"
+    bar.Position = position
+    bar.ScalarBarLength = 0.4
+
+
+style_bar(lut, "mean stress / E", [0.86, 0.52])
 
 if os.path.exists(os.path.join(d, "contacts.pvd")):
     contacts = PVDReader(FileName=os.path.join(d, "contacts.pvd"))
     c = Show(contacts, view)
     ColorBy(c, ("CELLS", "normal_force"))
     flut = GetColorTransferFunction("normal_force")
-    flut.ApplyPreset("Reds", True)
+    # Weak contacts transparent, strong ones black: the force chains over the grains.
+    flut.ApplyPreset("Grayscale", True)
+    flut.InvertTransferFunction()
     c.RescaleTransferFunctionToDataRange(False, True)
+    flut.EnableOpacityMapping = 1
+    top = flut.RGBPoints[-4]
+    GetOpacityTransferFunction("normal_force").Points = [0.0, 0.0, 0.5, 0.0, top, 1.0, 0.5, 0.0]
     c.LineWidth = 2.0
+    c.SetScalarBarVisibility(view, True)
+    style_bar(flut, "normal force", [0.86, 0.06])
 
 boundary = PVDReader(FileName=os.path.join(d, "boundary.pvd"))
 b = Show(boundary, view)
-ColorBy(b, None)
+b.ColorArrayName = ["CELLS", ""]
 b.AmbientColor = [0, 0, 0]
 b.DiffuseColor = [0, 0, 0]
 b.LineWidth = 3.0
@@ -64,6 +83,17 @@ ResetCamera(view)
 view.CameraPosition = [view.CameraFocalPoint[0], view.CameraFocalPoint[1], 10.0]
 view.CameraViewUp = [0, 1, 0]
 ResetCamera(view)
+# The box fills the view, the colour bars at its right.
+boundary.UpdatePipeline(last)
+bounds = boundary.GetDataInformation().GetBounds()
+print("box", bounds)
+cx, cy = 0.5 * (bounds[0] + bounds[1]), 0.5 * (bounds[2] + bounds[3])
+half = 0.5 * max(bounds[1] - bounds[0], bounds[3] - bounds[2])
+view.CameraFocalPoint = [cx + 0.22 * half, cy, 0.0]
+view.CameraPosition = [cx + 0.22 * half, cy, 10.0]
+view.CameraParallelProjection = 1
+view.CameraParallelScale = 1.04 * half
 Render(view)
-SaveScreenshot(out, view, ImageResolution=[size, size], TransparentBackground=0)
+print("camera", view.CameraPosition, view.CameraFocalPoint, view.CameraParallelScale)
+SaveScreenshot(out, view, ImageResolution=view.ViewSize, TransparentBackground=0)
 print(f"{out}: time {last}")
