@@ -252,6 +252,8 @@ fn a_meshfree_log_exports_its_boundary_contours() {
         .arg("--quiet")
         .arg("--mcap")
         .arg(&log_path)
+        .arg("--vtk")
+        .arg(dir.join("vtk_run"))
         .status()
         .unwrap();
     assert!(status.success());
@@ -273,6 +275,10 @@ fn a_meshfree_log_exports_its_boundary_contours() {
     };
     let read = read_with_python(&python, &vtk);
     assert_eq!(read.collections["grains.pvd"], log.frame_count());
+    // `sdem run --vtk` wrote the same polygons and stresses as the export of its log.
+    let run = read_with_python(&python, &dir.join("vtk_run"));
+    assert_eq!(run.datasets["grains.pvd"], read.datasets["grains.pvd"]);
+    assert_eq!(run.values, read.values);
     for (k, (time, points, lines, polys, _)) in read.datasets["grains.pvd"].iter().enumerate() {
         let frame = log.frame(k as i64).unwrap();
         let contours = frame.contours.as_ref().unwrap();
@@ -290,6 +296,61 @@ fn a_meshfree_log_exports_its_boundary_contours() {
         .map(|c| c.mean_stress_c)
         .collect();
     assert_eq!(mean, &expected);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_periodic_run_draws_each_contact_to_the_nearest_image() {
+    let dir = temp_dir("periodic");
+    let text = FRICTIONAL.replace("output:", "boundary: Periodic,\n    output:");
+    let scenario = Scenario::parse(&text, "vtk_periodic.ron").unwrap();
+    let log_path = dir.join("run.mcap");
+    let vtk = dir.join("vtk");
+    run_scenario(
+        &scenario,
+        &RunOptions {
+            out_dir: dir.clone(),
+            mcap: Some(McapSettings::new(&log_path)),
+            vtk: Some(vtk.clone()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let log = Trajectory::open(&log_path).unwrap();
+    let last = log.frame(-1).unwrap();
+    let cell = last.cell.expect("a periodic log has a cell");
+    let Some(python) = python_with_vtk() else {
+        eprintln!("note: Python vtk check skipped");
+        return;
+    };
+    let read = read_with_python(&python, &vtk);
+    assert_eq!(read.collections["contacts.pvd"], log.frame_count());
+    let (_, _, lines, _, _) = read.datasets["contacts.pvd"].last().unwrap();
+    assert_eq!(*lines, last.contacts.len());
+    let (_, points, lines, _, _) = read.datasets["boundary.pvd"].last().unwrap();
+    assert_eq!((*lines, *points), (4, 8));
+    // Each contact line joins two touching grains: no longer than their two largest radii
+    // (contacts across the cell's sides included; there are some).
+    let lengths = &read.values[&("contacts.pvd".into(), "segment_length".into())];
+    assert_eq!(lengths.len(), last.contacts.len());
+    for (l, c) in lengths.iter().zip(&last.contacts) {
+        let (a, b) = (
+            &last.grains[c.first as usize],
+            &last.grains[c.second as usize],
+        );
+        let reach = a.radius * (1.0 + a.eps1.max(a.eps2)) + b.radius * (1.0 + b.eps1.max(b.eps2));
+        assert!(*l <= reach * (1.0 + 1e-5), "{l} > {reach}");
+    }
+    let width = cell.widths()[0].min(cell.widths()[1]);
+    let across = last
+        .contacts
+        .iter()
+        .filter(|c| {
+            let d = last.grains[c.first as usize].center - last.grains[c.second as usize].center;
+            d.length() > 0.5 * width
+        })
+        .count();
+    assert!(across > 0, "no contact across the cell's sides");
     std::fs::remove_dir_all(&dir).ok();
 }
 

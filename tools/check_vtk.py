@@ -49,6 +49,15 @@ def main():
             print("dataset", pvd, k, repr(float(ds.get("timestep"))), poly.GetNumberOfPoints(),
                   poly.GetNumberOfLines(), poly.GetNumberOfPolys(), ",".join(names))
             if k == wanted:
+                if poly.GetNumberOfLines() > 0:
+                    pts = vtk_to_numpy(poly.GetPoints().GetData())
+                    lines = vtk_to_numpy(poly.GetLines().GetConnectivityArray())
+                    offsets = vtk_to_numpy(poly.GetLines().GetOffsetsArray())
+                    lengths = []
+                    for a, b in zip(offsets[:-1], offsets[1:]):
+                        p, q = pts[lines[a]], pts[lines[b - 1]]
+                        lengths.append(float(((p - q) ** 2).sum() ** 0.5))
+                    print("values", pvd, "segment_length", " ".join(repr(v) for v in lengths))
                 for name in ("mean_stress_c", "normal_force", "tangential_force", "level", "id"):
                     arr = cd.GetArray(name)
                     if arr is not None:

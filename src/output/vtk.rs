@@ -14,7 +14,8 @@
 //! inline (`format="binary"`, `compressor="vtkZLibDataCompressor"`, `header_type="UInt64"`):
 //! the standard layout of VTK's own XML writers, read by ParaView and the `vtk` Python package.
 //!
-//! Units are the scenario's. `normal_force` is compression positive (the magnitude of the
+//! Points are single precision (as ParaView keeps them), cell data double. Units are the
+//! scenario's. `normal_force` is compression positive (the magnitude of the
 //! repulsive normal force); `tangential_force` is signed along `perp(normal)` of the pair's
 //! first grain and zero without friction. `von_mises` is that of the plane-stress tensor
 //! `sqrt(sxx² - sxx syy + syy² + 3 sxy²)`. `level` is the grain model level (0 rigid,
@@ -372,6 +373,7 @@ enum CellKind {
 /// Values of a data array, of a VTK type.
 #[derive(Debug, Clone, PartialEq)]
 enum Values {
+    F32(Vec<f32>),
     F64(Vec<f64>),
     I32(Vec<i32>),
     I64(Vec<i64>),
@@ -380,6 +382,7 @@ enum Values {
 impl Values {
     fn vtk_type(&self) -> &'static str {
         match self {
+            Values::F32(_) => "Float32",
             Values::F64(_) => "Float64",
             Values::I32(_) => "Int32",
             Values::I64(_) => "Int64",
@@ -388,6 +391,7 @@ impl Values {
 
     fn len(&self) -> usize {
         match self {
+            Values::F32(v) => v.len(),
             Values::F64(v) => v.len(),
             Values::I32(v) => v.len(),
             Values::I64(v) => v.len(),
@@ -396,6 +400,7 @@ impl Values {
 
     fn le_bytes(&self) -> Vec<u8> {
         match self {
+            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
             Values::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
             Values::I32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
             Values::I64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
@@ -474,8 +479,14 @@ impl PolyData {
             data_array(&mut x, a.name, a.components, &a.values, false);
         }
         x.push_str("</CellData>\n<Points>\n");
-        let xyz: Vec<f64> = self.points.iter().flat_map(|p| [p.x, p.y, 0.0]).collect();
-        data_array(&mut x, "Points", 3, &Values::F64(xyz), false);
+        // Single precision, as ParaView keeps points: 1e-7 of the box is far below a grain's
+        // size, and it halves the files (the cell data stay double).
+        let xyz: Vec<f32> = self
+            .points
+            .iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, 0.0])
+            .collect();
+        data_array(&mut x, "Points", 3, &Values::F32(xyz), false);
         x.push_str("</Points>\n");
         for (tag, cells) in [("Lines", &self.lines), ("Polys", &self.polys)] {
             let _ = writeln!(x, "<{tag}>");
