@@ -51,13 +51,15 @@ fn python_with_vtk() -> Option<PathBuf> {
     venv.exists().then_some(venv)
 }
 
+/// One dataset as VTK read it: (time, points, lines, polygons, cell array names).
+type Dataset = (f64, usize, usize, usize, Vec<String>);
+
 /// What `tools/check_vtk.py` read from one export.
 #[derive(Debug, Default)]
 struct Read {
     /// Per collection: the datasets it lists.
     collections: BTreeMap<String, usize>,
-    /// Per collection: (time, points, lines, polys, cell array names) of each dataset.
-    datasets: BTreeMap<String, Vec<(f64, usize, usize, usize, Vec<String>)>>,
+    datasets: BTreeMap<String, Vec<Dataset>>,
     /// (collection, array) -> values of the last frame.
     values: BTreeMap<(String, String), Vec<f64>>,
 }
@@ -163,9 +165,7 @@ fn a_run_and_its_log_export_files_that_vtk_reads_back() {
     }
 
     let Some(python) = python_with_vtk() else {
-        eprintln!(
-            "note: Python vtk check skipped (set SDEM_VTK_PYTHON or create target/vtk-venv)"
-        );
+        eprintln!("note: Python vtk check skipped (set SDEM_VTK_PYTHON or create target/vtk-venv)");
         std::fs::remove_dir_all(&dir).ok();
         return;
     };

@@ -201,7 +201,6 @@ impl FrameContour {
     }
 }
 
-
 /// The active contacts of the world's last step, in pair order.
 pub fn active_contacts(world: &World) -> Vec<FrameContact> {
     world

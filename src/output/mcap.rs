@@ -7,7 +7,7 @@
 //! | topic | schema (encoding) | message encoding | content |
 //! | --- | --- | --- | --- |
 //! | `/grains` | `sdem_msgs/msg/Grains` (ros2msg) | cdr | the six DoF, radius and Love–Weber stress of every grain, f64 |
-//! | `/contacts` | `sdem_msgs/msg/Contacts` (ros2msg) | cdr | active grain–grain contacts: pair, point, normal, force, length, f32 |
+//! | `/contacts` | `sdem_msgs/msg/Contacts` (ros2msg) | cdr | active grain–grain contacts: pair, point, normal, force, length, f32; a frictional run's log also the tangential force |
 //! | `/walls` | `sdem_msgs/msg/Walls` (ros2msg) | cdr | wall point, normal, velocity, f64 |
 //! | `/macro` | `sdem_msgs/msg/Macro` (ros2msg) | cdr | the row of `macro.csv` |
 //! | `/scene` | `foxglove.SceneUpdate` (jsonschema) | json | grains as flat ellipses (scaled cylinders) coloured by mean stress, and the box |
@@ -37,7 +37,12 @@
 //! `log_time` is the simulated time in nanoseconds, `round(time * 1e9)`, bumped by 1 ns when
 //! needed to stay strictly increasing; every message also carries the exact `step` and `time`.
 //! Nothing in a log comes from the wall clock: the same run gives the same bytes.
-
+//!
+//! The code by role: `schemas` (topics, `.msg` texts, the CDR encoders and decoders),
+//! `cdr` (the encoding), `scene` (the Foxglove `/scene` JSON), `writer` ([`TrajectoryWriter`]),
+//! `reader` ([`Trajectory`]), `resume` (continuing a log after a checkpoint) and [`contours`]
+//! (the meshfree channel). What a frame holds is [`crate::output::frame`], shared with `render`,
+//! `plot` and the VTK export.
 
 mod cdr;
 pub mod contours;

@@ -14,8 +14,8 @@
 //! only, with the same colours.
 
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-pub use crate::output::colour::viridis;
 use crate::output::colour::stress_colour_max;
+pub use crate::output::colour::viridis;
 pub use crate::output::frame::outline::{clip_half_plane, frame_cuts, grain_outline};
 use crate::output::frame::{Frame, FrameContour};
 use glam::DVec2;

@@ -218,9 +218,8 @@ fn ellipse_grains(frame: &Frame, options: &VtkOptions) -> PolyData {
         let outline = grain_outline(g, options.outline_nodes, cut);
         poly.add_cell(CellKind::Poly, &outline);
     }
-    let column = |f: fn(&FrameGrain) -> f64| -> Values {
-        Values::F64(frame.grains.iter().map(f).collect())
-    };
+    let column =
+        |f: fn(&FrameGrain) -> f64| -> Values { Values::F64(frame.grains.iter().map(f).collect()) };
     let n = frame.grains.len();
     poly.cell_data = vec![
         DataArray::new("id", 1, Values::I32((0..n as i32).collect())),
@@ -559,8 +558,7 @@ fn zlib(block: &[u8]) -> Vec<u8> {
 
 /// Standard base64 (RFC 4648) with padding.
 fn base64(out: &mut String, bytes: &[u8]) {
-    const ALPHABET: &[u8; 64] =
-        b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     for chunk in bytes.chunks(3) {
         let b = [
             chunk[0],
@@ -611,7 +609,10 @@ mod tests {
         let mut p = PolyData::default();
         p.add_cell(CellKind::Poly, &[DVec2::ZERO, DVec2::X, DVec2::Y]);
         p.add_cell(CellKind::Line, &[DVec2::ZERO, DVec2::X]);
-        p.add_cell(CellKind::Poly, &[DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y]);
+        p.add_cell(
+            CellKind::Poly,
+            &[DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y],
+        );
         assert_eq!(p.points.len(), 9);
         assert_eq!(p.polys.offsets, [3, 7]);
         assert_eq!(p.polys.connectivity, [0, 1, 2, 5, 6, 7, 8]);

@@ -9,8 +9,8 @@ use super::{
 use crate::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size};
 use crate::output::mcap::{ContinueFrom, TrajectoryWriter, WriteError};
-use crate::output::vtk::{VtkOptions, VtkWriter};
 use crate::output::reference::CantorReference;
+use crate::output::vtk::{VtkOptions, VtkWriter};
 use crate::output::{MacroWriter, Measures};
 use crate::scenario::Scenario;
 use glam::DVec2;

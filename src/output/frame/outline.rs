@@ -73,4 +73,3 @@ pub fn frame_cuts(frame: &Frame) -> Vec<Vec<(DVec2, DVec2)>> {
     }
     cuts
 }
-

@@ -2,7 +2,7 @@
 
 /// Serializer of plain CDR (the encoding of ROS 2 messages), little endian.
 pub(super) struct CdrWriter<'a> {
-    pub(super) buf: &'a mut Vec<u8>,
+    buf: &'a mut Vec<u8>,
 }
 
 impl<'a> CdrWriter<'a> {
@@ -14,7 +14,7 @@ impl<'a> CdrWriter<'a> {
     }
 
     /// Pads to a multiple of `n` counted from the end of the encapsulation header.
-    pub(super) fn align(&mut self, n: usize) {
+    fn align(&mut self, n: usize) {
         let pad = (n - (self.buf.len() - 4) % n) % n;
         self.buf.extend(std::iter::repeat_n(0u8, pad));
     }
@@ -29,7 +29,7 @@ impl<'a> CdrWriter<'a> {
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
 
-    pub(super) fn u32(&mut self, v: u32) {
+    fn u32(&mut self, v: u32) {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
@@ -75,8 +75,8 @@ impl<'a> CdrWriter<'a> {
 
 /// Deserializer of plain CDR, little endian, with every read bounds-checked.
 pub(super) struct CdrReader<'a> {
-    pub(super) data: &'a [u8],
-    pub(super) pos: usize,
+    data: &'a [u8],
+    pos: usize,
 }
 
 pub(super) type CdrResult<T> = Result<T, String>;
@@ -95,7 +95,7 @@ impl<'a> CdrReader<'a> {
         Ok(Self { data, pos: 4 })
     }
 
-    pub(super) fn align(&mut self, n: usize) {
+    fn align(&mut self, n: usize) {
         self.pos += (n - (self.pos - 4) % n) % n;
     }
 
@@ -104,7 +104,7 @@ impl<'a> CdrReader<'a> {
         self.data.len().saturating_sub(self.pos)
     }
 
-    pub(super) fn take(&mut self, n: usize) -> CdrResult<&'a [u8]> {
+    fn take(&mut self, n: usize) -> CdrResult<&'a [u8]> {
         let end = self
             .pos
             .checked_add(n)
@@ -131,7 +131,7 @@ impl<'a> CdrReader<'a> {
         Ok(f64::from_le_bytes(self.take(8)?.try_into().unwrap()))
     }
 
-    pub(super) fn u32(&mut self) -> CdrResult<u32> {
+    fn u32(&mut self) -> CdrResult<u32> {
         self.align(4);
         Ok(u32::from_le_bytes(self.take(4)?.try_into().unwrap()))
     }
@@ -144,7 +144,7 @@ impl<'a> CdrReader<'a> {
     }
 
     /// Length of a sequence of `size`-byte elements, checked against the bytes left.
-    pub(super) fn seq_len(&mut self, size: usize) -> CdrResult<usize> {
+    fn seq_len(&mut self, size: usize) -> CdrResult<usize> {
         let n = self.u32()? as usize;
         if n > 0 {
             self.align(size);
@@ -190,7 +190,7 @@ mod tests {
     use super::*;
 
     #[test]
-    pub(super) fn cdr_layout_matches_the_ros2_rules() {
+    fn cdr_layout_matches_the_ros2_rules() {
         // Expectation (XCDR1): u64 at 0, f64 at 8, sequence length at 16, 4 bytes of padding,
         // the first element at 24; an empty sequence gets no padding.
         let mut buf = Vec::new();

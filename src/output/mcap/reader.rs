@@ -32,32 +32,32 @@ pub struct AttachmentInfo {
     pub name: String,
     pub media_type: String,
     pub size: u64,
-    pub(super) offset: u64,
-    pub(super) length: u64,
+    offset: u64,
+    length: u64,
 }
 
 /// Where one message lies: its log time and the chunk that holds it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct MessageRef {
-    pub(super) log_time: u64,
-    pub(super) chunk: usize,
+    log_time: u64,
+    chunk: usize,
 }
 
 /// A trajectory log opened for reading. Only the summary and the message indexes are read at
 /// open; a frame decompresses only the chunks that hold it.
 pub struct Trajectory {
-    pub(super) path: PathBuf,
-    pub(super) file: Mutex<File>,
-    pub(super) file_size: u64,
-    pub(super) header: records::Header,
-    pub(super) summary: mcap::Summary,
-    pub(super) channels: Vec<ChannelInfo>,
+    path: PathBuf,
+    file: Mutex<File>,
+    file_size: u64,
+    header: records::Header,
+    summary: mcap::Summary,
+    channels: Vec<ChannelInfo>,
     /// Per channel id, its messages in log-time order.
-    pub(super) messages: HashMap<u16, Vec<MessageRef>>,
-    pub(super) attachments: Vec<AttachmentInfo>,
-    pub(super) metadata: BTreeMap<String, BTreeMap<String, String>>,
+    messages: HashMap<u16, Vec<MessageRef>>,
+    attachments: Vec<AttachmentInfo>,
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
     /// The channel with one message per frame: `/grains` (SDEM) or `/contours` (meshfree).
-    pub(super) frame_topic: &'static str,
+    frame_topic: &'static str,
 }
 
 /// A step count and its simulated time.
@@ -210,11 +210,11 @@ impl Trajectory {
         Ok(traj)
     }
 
-    pub(super) fn name(&self) -> String {
+    fn name(&self) -> String {
         self.path.display().to_string()
     }
 
-    pub(super) fn corrupt(&self, reason: impl Into<String>) -> ReadError {
+    fn corrupt(&self, reason: impl Into<String>) -> ReadError {
         ReadError::Corrupt {
             path: self.name(),
             reason: reason.into(),
@@ -222,7 +222,7 @@ impl Trajectory {
     }
 
     /// Reads `len` bytes at `offset`, checked against the file size.
-    pub(super) fn read_range(&self, offset: u64, len: u64) -> Result<Vec<u8>, ReadError> {
+    fn read_range(&self, offset: u64, len: u64) -> Result<Vec<u8>, ReadError> {
         let end = offset.checked_add(len).filter(|&e| e <= self.file_size);
         if end.is_none() {
             return Err(self.corrupt(format!(
@@ -242,7 +242,7 @@ impl Trajectory {
         Ok(buf)
     }
 
-    pub(super) fn check_chunk_indexes(&self) -> Result<(), ReadError> {
+    fn check_chunk_indexes(&self) -> Result<(), ReadError> {
         for (k, c) in self.summary.chunk_indexes.iter().enumerate() {
             let end = c
                 .chunk_start_offset
@@ -260,7 +260,7 @@ impl Trajectory {
 
     /// Builds the per-channel message lists from the message indexes after each chunk, or by
     /// reading the chunks if a file has no message indexes.
-    pub(super) fn index_messages(&mut self) -> Result<(), ReadError> {
+    fn index_messages(&mut self) -> Result<(), ReadError> {
         let mut messages: HashMap<u16, Vec<MessageRef>> = HashMap::new();
         for k in 0..self.summary.chunk_indexes.len() {
             let c = &self.summary.chunk_indexes[k];
@@ -298,7 +298,7 @@ impl Trajectory {
         Ok(())
     }
 
-    pub(super) fn read_attachment_and_metadata_indexes(&mut self) -> Result<(), ReadError> {
+    fn read_attachment_and_metadata_indexes(&mut self) -> Result<(), ReadError> {
         let attachments = self
             .summary
             .attachment_indexes
@@ -330,7 +330,7 @@ impl Trajectory {
 
     /// Decompresses chunk `k` and maps `f` over its messages that `keep` selects (by channel
     /// id and log time).
-    pub(super) fn chunk_messages<T>(
+    fn chunk_messages<T>(
         &self,
         k: usize,
         keep: impl Fn(u16, u64) -> bool,
@@ -465,7 +465,7 @@ impl Trajectory {
         names.join(",")
     }
 
-    pub(super) fn refs(&self, topic: &str) -> &[MessageRef] {
+    fn refs(&self, topic: &str) -> &[MessageRef] {
         self.channel(topic)
             .and_then(|c| self.messages.get(&c.id))
             .map_or(&[], |v| v.as_slice())
@@ -514,7 +514,7 @@ impl Trajectory {
     }
 
     /// The raw payloads of the messages on `topic` at `log_time`.
-    pub(super) fn payloads_at(&self, topic: &str, log_time: u64) -> Result<Vec<Vec<u8>>, ReadError> {
+    fn payloads_at(&self, topic: &str, log_time: u64) -> Result<Vec<Vec<u8>>, ReadError> {
         let Some(channel) = self.channel(topic).map(|c| c.id) else {
             return Ok(Vec::new());
         };
@@ -536,7 +536,7 @@ impl Trajectory {
         Ok(out)
     }
 
-    pub(super) fn single_payload(&self, topic: &str, log_time: u64) -> Result<Option<Vec<u8>>, ReadError> {
+    fn single_payload(&self, topic: &str, log_time: u64) -> Result<Option<Vec<u8>>, ReadError> {
         Ok(self.payloads_at(topic, log_time)?.into_iter().next())
     }
 
@@ -696,7 +696,7 @@ impl Trajectory {
 }
 
 /// Drives the mcap crate's sans-io summary reader over a file.
-pub(super) fn read_summary(file: &mut File, file_size: u64) -> mcap::McapResult<Option<mcap::Summary>> {
+fn read_summary(file: &mut File, file_size: u64) -> mcap::McapResult<Option<mcap::Summary>> {
     use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
     let mut reader = SummaryReader::new_with_options(
         SummaryReaderOptions::default()
@@ -717,4 +717,3 @@ pub(super) fn read_summary(file: &mut File, file_size: u64) -> mcap::McapResult<
     }
     Ok(reader.finish())
 }
-

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use std::fmt::Write as _;
 
 /// `{"sec":..,"nsec":..}` of a log time in ns.
-pub(super) fn json_time(out: &mut String, ns: u64) {
+fn json_time(out: &mut String, ns: u64) {
     let _ = write!(
         out,
         "{{\"sec\":{},\"nsec\":{}}}",
@@ -20,7 +20,7 @@ pub(super) fn json_time(out: &mut String, ns: u64) {
 
 /// A finite number for JSON (non-finite values become 0).
 #[inline]
-pub(super) fn num(v: f64) -> f64 {
+fn num(v: f64) -> f64 {
     if v.is_finite() { v } else { 0.0 }
 }
 
@@ -100,7 +100,13 @@ pub(super) fn encode_scene(out: &mut String, world: &World, log_time: u64) {
 /// The box entity of `/scene` (after a comma): a line loop through the corners of the four
 /// walls (a periodic cell's sides: a parallelogram), `0.25 * mean_radius` thick; nothing
 /// unless there are at least four walls (planes after the box's four are not drawn).
-pub(super) fn encode_box(out: &mut String, walls: &[Wall], log_time: u64, mean_radius: f64, decimals: usize) {
+pub(super) fn encode_box(
+    out: &mut String,
+    walls: &[Wall],
+    log_time: u64,
+    mean_radius: f64,
+    decimals: usize,
+) {
     if walls.len() >= 4 {
         use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
         let (x0, x1) = (walls[LEFT].point.x, walls[RIGHT].point.x);

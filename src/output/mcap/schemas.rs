@@ -362,13 +362,12 @@ pub(super) fn decode_macro(data: &[u8]) -> CdrResult<Measures> {
     })
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    pub(super) fn macro_row_round_trips_with_infinities() {
+    fn macro_row_round_trips_with_infinities() {
         let m = Measures {
             step: 12,
             time: 0.25,

@@ -43,24 +43,24 @@ impl McapSettings {
 
 /// Writes a run's trajectory log, one frame per call of [`TrajectoryWriter::write_frame`].
 pub struct TrajectoryWriter {
-    pub(super) path: String,
+    path: String,
     pub(super) inner: mcap::Writer<BufWriter<File>>,
     /// The same open file, to fsync it.
-    pub(super) file: File,
+    file: File,
     /// A continued log is written to a temporary file that replaces this one at the first
     /// [`TrajectoryWriter::sync`] or at [`TrajectoryWriter::finish`].
     pub(super) replaces: Option<PathBuf>,
     /// The channels of the grains: SDEM ellipses or meshfree contours.
     pub(super) bodies: Bodies,
-    pub(super) walls: u16,
-    pub(super) macro_row: u16,
-    pub(super) scene: u16,
+    walls: u16,
+    macro_row: u16,
+    scene: u16,
     pub(super) scene_every: u64,
     pub(super) sequence: u32,
     pub(super) last_log_time: Option<u64>,
     pub(super) frames: u64,
     pub(super) buf: Vec<u8>,
-    pub(super) text: String,
+    text: String,
 }
 
 /// A new log's writer with the `sdem.run` metadata and the scenario attachment it wrote (see
@@ -354,7 +354,12 @@ impl TrajectoryWriter {
         }
     }
 
-    pub(super) fn put(&mut self, channel: u16, log_time: u64, data: &[u8]) -> Result<(), WriteError> {
+    pub(super) fn put(
+        &mut self,
+        channel: u16,
+        log_time: u64,
+        data: &[u8],
+    ) -> Result<(), WriteError> {
         let header = records::MessageHeader {
             channel_id: channel,
             sequence: self.sequence,
@@ -459,7 +464,7 @@ impl TrajectoryWriter {
     }
 
     /// Renames the temporary file of a continued log over the log it continues (once).
-    pub(super) fn replace_original(&mut self) -> Result<(), WriteError> {
+    fn replace_original(&mut self) -> Result<(), WriteError> {
         if let Some(to) = self.replaces.take() {
             rename_durably(&self.path, &to)?;
             self.path = to.display().to_string();
@@ -498,7 +503,7 @@ pub(super) type McapWriter = mcap::Writer<BufWriter<File>>;
 impl TrajectoryWriter {
     /// Creates the file of a new log (and its folder) and writes the MCAP header: (path for
     /// messages, writer, a handle on the same file to fsync it).
-    pub(super) fn open_file(settings: &McapSettings) -> Result<(String, McapWriter, File), WriteError> {
+    fn open_file(settings: &McapSettings) -> Result<(String, McapWriter, File), WriteError> {
         let path = settings.path.display().to_string();
         if let Some(dir) = settings.path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|error| WriteError::Io {
@@ -552,7 +557,7 @@ pub(super) fn add_channel(
 }
 
 /// Attaches the scenario (RON, every default filled in) as `scenario.ron`; returns its text.
-pub(super) fn attach_scenario(
+fn attach_scenario(
     inner: &mut McapWriter,
     path: &str,
     scenario: &Scenario,
@@ -578,7 +583,7 @@ pub(super) fn attach_scenario(
 }
 
 /// Renames `from` to `to` and fsyncs the folder (where the platform allows opening one).
-pub(super) fn rename_durably(from: &str, to: &Path) -> Result<(), WriteError> {
+fn rename_durably(from: &str, to: &Path) -> Result<(), WriteError> {
     std::fs::rename(from, to).map_err(|error| WriteError::Io {
         path: format!("{from} -> {}", to.display()),
         error,
@@ -590,4 +595,3 @@ pub(super) fn rename_durably(from: &str, to: &Path) -> Result<(), WriteError> {
     }
     Ok(())
 }
-
