@@ -153,7 +153,7 @@ pub(super) fn stress_colour(mean_stress_c: f64, top: f64) -> [u8; 3] {
     } else {
         0.0
     };
-    crate::output::render::viridis(t)
+    crate::output::colour::viridis(t)
 }
 
 /// A point of a `/scene` primitive, in the plane z = 0, with `decimals` decimals.
