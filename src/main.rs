@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use sdem::output::mcap::{McapSettings, Trajectory};
 use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
+use sdem::output::vtk::{DEFAULT_OUTLINE_NODES, VtkOptions, VtkWriter};
 use sdem::run::checkpoint::AnyCheckpoint;
 use sdem::run::{RunOptions, resume_run, run_scenario};
 use sdem::scenario::{CheckpointInterval, Scenario};
@@ -46,6 +47,11 @@ enum Command {
         /// to 10^4 grains, every ceil(N/10^4)-th frame above).
         #[arg(long, value_name = "K", requires = "mcap")]
         mcap_scene_every: Option<u64>,
+        /// Also write the trajectory for ParaView: DIR/grains.pvd, DIR/contacts.pvd and
+        /// DIR/boundary.pvd, time series of VTK PolyData files (DIR/vtp/*.vtp), one frame per
+        /// row of macro.csv (see `sdem export --vtk`).
+        #[arg(long, value_name = "DIR")]
+        vtk: Option<PathBuf>,
         /// Keep the latest checkpoint in DIR/checkpoint.bin, written every STEPS steps, on
         /// Ctrl-C / SIGTERM (then the run stops) and at the end (see `sdem resume`). Overrides
         /// the scenario's output.checkpoint.
@@ -186,6 +192,25 @@ enum Command {
         #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_region)]
         region: Option<Region>,
     },
+    /// Export a trajectory log for ParaView: every frame as VTK PolyData (.vtp) files in
+    /// DIR/vtp/, listed with their simulated times in DIR/grains.pvd (deformed grain outlines
+    /// with their stresses and DoF), DIR/contacts.pvd (the contact network) and
+    /// DIR/boundary.pvd (walls or periodic cell). Open the .pvd files in ParaView.
+    Export {
+        /// The log written by `sdem run --mcap FILE`.
+        file: PathBuf,
+        /// Output directory of the VTK files.
+        #[arg(long, value_name = "DIR")]
+        vtk: PathBuf,
+        /// Nodes of an SDEM grain's contour polygon before its flat contact cuts.
+        #[arg(long, default_value_t = DEFAULT_OUTLINE_NODES as u32,
+              value_parser = clap::value_parser!(u32).range(8..=100_000))]
+        outline_nodes: u32,
+        /// Export every K-th frame only (and always the last).
+        #[arg(long, value_name = "K", default_value_t = 1,
+              value_parser = clap::value_parser!(u64).range(1..))]
+        every: u64,
+    },
     /// Plot the macroscopic curves (p_c against phi with eq. 69, z and q_c against p_c) from a
     /// run directory, its macro.csv or a trajectory log.
     Plot {
@@ -293,6 +318,7 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
             mcap,
             mcap_scene_every,
+            vtk,
             checkpoint_every,
             checkpoint_every_seconds,
         } => {
@@ -341,6 +367,7 @@ fn run(cli: Cli) -> Result<()> {
                     path,
                     scene_every: mcap_scene_every,
                 }),
+                vtk,
                 checkpoint_every: every,
                 checkpoint_seconds: seconds,
                 stop: (every > 0 || seconds.is_some()).then(stop_signals::install),
@@ -385,6 +412,7 @@ fn run(cli: Cli) -> Result<()> {
                     path,
                     scene_every: None,
                 }),
+                vtk: None,
                 checkpoint_every: every,
                 checkpoint_seconds: seconds,
                 stop: (every > 0 || seconds.is_some()).then(stop_signals::install),
@@ -641,6 +669,12 @@ fn run(cli: Cli) -> Result<()> {
                 info.height
             );
         }
+        Command::Export {
+            file,
+            vtk,
+            outline_nodes,
+            every,
+        } => export_vtk(&file, &vtk, outline_nodes as usize, every as usize)?,
         Command::Plot { source, out, svg } => {
             let series = MacroSeries::load(&source).map_err(anyhow::Error::msg)?;
             let format = if svg {
@@ -740,6 +774,38 @@ mod stop_signals {
 }
 
 /// `sdem inspect`: what a trajectory log holds.
+/// `sdem export --vtk`: every frame of the log to VTK files.
+fn export_vtk(file: &Path, dir: &Path, outline_nodes: usize, every: usize) -> Result<()> {
+    let started = std::time::Instant::now();
+    let log = Trajectory::open(file)?;
+    let count = log.frame_count();
+    if count == 0 {
+        bail!("{}: the log holds no frames", file.display());
+    }
+    let mut writer = VtkWriter::create(dir, VtkOptions { outline_nodes })?;
+    for k in (0..count).filter(|k| k % every == 0 || k + 1 == count) {
+        let frame = log.frame(k as i64)?;
+        writer
+            .write_frame(&frame)
+            .with_context(|| format!("{}: frame {k}", file.display()))?;
+    }
+    let summary = writer.finish()?;
+    eprintln!(
+        "{}: {} frames exported to {} ({:.1} MB, {:.1} s)",
+        file.display(),
+        summary.frames,
+        summary
+            .collections
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        summary.bytes as f64 / 1e6,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 fn inspect(file: &Path) -> Result<()> {
     let log = Trajectory::open(file)?;
     let sizes = log.sizes();

@@ -14,7 +14,10 @@
 //! only, with the same colours.
 
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-use crate::output::mcap::{Frame, FrameContour, FrameGrain, stress_colour_max};
+use crate::output::colour::stress_colour_max;
+pub use crate::output::colour::viridis;
+pub use crate::output::frame::outline::{clip_half_plane, frame_cuts, grain_outline};
+use crate::output::frame::{Frame, FrameContour};
 use glam::DVec2;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -34,104 +37,6 @@ pub fn register_fonts() {
         // the pictures, which plotters then reports as a drawing error.
         let _ = plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, FONT);
     });
-}
-
-/// Viridis colour map (matplotlib's default), `t` in [0, 1].
-pub fn viridis(t: f64) -> [u8; 3] {
-    const STOPS: [[f64; 3]; 9] = [
-        [68.0, 1.0, 84.0],
-        [72.0, 40.0, 120.0],
-        [62.0, 74.0, 137.0],
-        [49.0, 104.0, 142.0],
-        [38.0, 130.0, 142.0],
-        [31.0, 158.0, 137.0],
-        [53.0, 183.0, 121.0],
-        [109.0, 205.0, 89.0],
-        [253.0, 231.0, 37.0],
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let x = t * (STOPS.len() - 1) as f64;
-    let k = (x.floor() as usize).min(STOPS.len() - 2);
-    let f = x - k as f64;
-    let mut out = [0u8; 3];
-    for c in 0..3 {
-        out[c] = (STOPS[k][c] + f * (STOPS[k + 1][c] - STOPS[k][c])).round() as u8;
-    }
-    out
-}
-
-/// Clips a convex polygon to the half-plane `(x - point) . normal <= 0` (Sutherland–Hodgman).
-pub fn clip_half_plane(polygon: &[DVec2], point: DVec2, normal: DVec2) -> Vec<DVec2> {
-    let n = polygon.len();
-    let mut out = Vec::with_capacity(n + 2);
-    for k in 0..n {
-        let a = polygon[k];
-        let b = polygon[(k + 1) % n];
-        let da = (a - point).dot(normal);
-        let db = (b - point).dot(normal);
-        if da <= 0.0 {
-            out.push(a);
-        }
-        if (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0) {
-            out.push(a + (b - a) * (da / (da - db)));
-        }
-    }
-    out
-}
-
-/// The outline of a grain: its contour polygon with `nodes` nodes, cut by each `(point,
-/// normal)` half-plane `(x - point) . normal <= 0`.
-pub fn grain_outline(grain: &FrameGrain, nodes: usize, cuts: &[(DVec2, DVec2)]) -> Vec<DVec2> {
-    let shape = grain.shape();
-    let nodes = nodes.max(8);
-    let mut polygon: Vec<DVec2> = (0..nodes)
-        .map(|k| {
-            let (s, c) = (k as f64 * std::f64::consts::TAU / nodes as f64).sin_cos();
-            shape.center + shape.map * DVec2::new(c, s)
-        })
-        .collect();
-    for &(point, normal) in cuts {
-        if polygon.len() < 3 {
-            break;
-        }
-        polygon = clip_half_plane(&polygon, point, normal);
-    }
-    polygon
-}
-
-/// The cuts of every grain of a frame: its contacts' chords and the walls it crosses. In a
-/// periodic cell a contact with an image of a grain is logged where the images meet: its chord
-/// is moved by the lattice vector that brings it to the grain itself, and the cell's sides cut
-/// nothing.
-pub fn frame_cuts(frame: &Frame) -> Vec<Vec<(DVec2, DVec2)>> {
-    let mut cuts: Vec<Vec<(DVec2, DVec2)>> = vec![Vec::new(); frame.grains.len()];
-    let near = |point: DVec2, g: usize| match &frame.cell {
-        Some(cell) => frame.grains[g].center + cell.minimum_image(point - frame.grains[g].center).0,
-        None => point,
-    };
-    for c in &frame.contacts {
-        let (i, j) = (c.first as usize, c.second as usize);
-        if i < cuts.len() && j < cuts.len() && c.normal.is_finite() && c.point.is_finite() {
-            cuts[i].push((near(c.point, i), c.normal));
-            cuts[j].push((near(c.point, j), -c.normal));
-        }
-    }
-    if frame.cell.is_some() {
-        return cuts;
-    }
-    for (g, list) in frame.grains.iter().zip(cuts.iter_mut()) {
-        let reach = g.radius * (1.0 + g.eps1.max(g.eps2));
-        for w in &frame.walls {
-            if w.height(g.center) < reach {
-                list.push((w.point, -w.normal));
-            }
-        }
-    }
-    cuts
 }
 
 /// How to draw a frame.
@@ -580,6 +485,7 @@ fn draw_frame_decor<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::output::frame::FrameGrain;
 
     #[test]
     fn a_plane_is_drawn_as_its_chord_of_the_view() {

@@ -28,6 +28,7 @@ use crate::meshfree::{
     TimeScheme, packing,
 };
 use crate::output::Measures;
+use crate::output::frame::Frame;
 use crate::output::mcap::{
     ContinueFrom, ContourLogInfo, FrameContour, McapSettings, TrajectoryWriter, WriteError,
 };
@@ -566,6 +567,18 @@ impl Simulation for Meshfree {
             &self.assembly.walls,
             row,
         )
+    }
+
+    fn frame(&self, row: &Measures) -> Result<Frame, String> {
+        let contours = self
+            .frame_contours()
+            .map_err(|e| format!("meshfree contours at step {}: {e}", self.step))?;
+        Ok(Frame::of_contours(
+            (self.step, self.state.time),
+            contours,
+            &self.assembly.walls,
+            Some(row.clone()),
+        ))
     }
 
     fn write_checkpoint(&self, path: &Path, run: &RunRecord<'_>) -> std::io::Result<()> {

@@ -163,6 +163,9 @@ pub struct RunOptions {
     pub progress_seconds: Option<f64>,
     /// Also write the trajectory as an MCAP log (see [`crate::output::mcap`]).
     pub mcap: Option<McapSettings>,
+    /// Also write the trajectory as VTK files for ParaView into this folder (see
+    /// [`crate::output::vtk`]); a new run only (`sdem resume` does not continue them).
+    pub vtk: Option<PathBuf>,
     /// Show a progress bar on stderr once the run has lasted a few seconds; drawn only when
     /// stderr is a terminal.
     pub progress_bar: bool,

@@ -8,6 +8,7 @@ use crate::boundary::walls::Wall;
 use crate::grain::Grain;
 use crate::integration::{Instability, World};
 use crate::output::files::write_grain_rows;
+use crate::output::frame::Frame;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
 use crate::output::{Measures, write_grains_csv};
 use crate::scenario::Scenario;
@@ -244,6 +245,10 @@ impl Simulation for Sdem {
 
     fn write_frame(&self, log: &mut TrajectoryWriter, row: &Measures) -> Result<(), WriteError> {
         log.write_frame(&self.world, row)
+    }
+
+    fn frame(&self, row: &Measures) -> Result<Frame, String> {
+        Ok(Frame::of_world(&self.world, Some(row.clone())))
     }
 
     fn statistics(&self) -> SolverStatistics {

@@ -4,6 +4,7 @@ use super::{AdaptiveStats, LoopState, RunError};
 use crate::boundary::loading::{LoadState, LoadingProgram};
 use crate::boundary::walls::Wall;
 use crate::output::Measures;
+use crate::output::frame::Frame;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
 use crate::scenario::Scenario;
 use glam::DVec2;
@@ -177,6 +178,13 @@ pub trait Simulation {
                 "this solver writes no MCAP frames",
             ),
         })
+    }
+
+    /// The current state as a frame of the neutral frame model, with its `macro.csv` row (for
+    /// the VTK export of `sdem run --vtk`). The default refuses (a solver without frames).
+    fn frame(&self, row: &Measures) -> Result<Frame, String> {
+        let _ = row;
+        Err("this solver writes no frames (run it without --vtk)".into())
     }
 
     /// Figures for the run summary.

@@ -10,6 +10,7 @@ use crate::boundary::loading::{LoadState, LoadingProgram, Phase, StopWhen};
 use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP, Wall, box_size};
 use crate::output::mcap::{ContinueFrom, TrajectoryWriter, WriteError};
 use crate::output::reference::CantorReference;
+use crate::output::vtk::{VtkOptions, VtkWriter};
 use crate::output::{MacroWriter, Measures};
 use crate::scenario::Scenario;
 use glam::DVec2;
@@ -56,6 +57,7 @@ pub(super) struct Run<'a> {
     extra: String,
     log: Option<TrajectoryWriter>,
     mcap_seconds: f64,
+    vtk: Option<VtkWriter>,
     checkpoint_path: PathBuf,
     checkpoints_on: bool,
     checkpoints_written: u64,
@@ -80,6 +82,14 @@ impl<'a> Run<'a> {
             Some(settings) => Some(sim.open_log(settings, scenario, continue_from)?),
             None => None,
         };
+        let vtk = match &options.vtk {
+            Some(dir) => {
+                let vtk = VtkWriter::create(dir, VtkOptions::default())
+                    .map_err(|e| io_error(dir)(std::io::Error::other(e.to_string())))?;
+                Some(vtk)
+            }
+            None => None,
+        };
         let phases: Vec<&'static str> = scenario.loading.iter().map(|p| p.name()).collect();
         Ok(Self {
             scenario,
@@ -92,6 +102,7 @@ impl<'a> Run<'a> {
             extra: String::new(),
             log,
             mcap_seconds: 0.0,
+            vtk,
             checkpoint_path: out.join(checkpoint::FILE_NAME),
             checkpoints_on: options.checkpoint_every > 0 || options.checkpoint_seconds.is_some(),
             checkpoints_written: 0,
@@ -353,6 +364,13 @@ impl<'a> Run<'a> {
             let written = sim.write_frame(log, &self.last_row);
             self.mcap_seconds += t.elapsed().as_secs_f64();
             written.map_err(self.log_error())?;
+        }
+        if let Some(vtk) = self.vtk.as_mut() {
+            let dir = self.options.vtk.clone().unwrap_or_default();
+            let vtk_error = |e: String| io_error(&dir)(std::io::Error::other(e));
+            let frame = sim.frame(&self.last_row).map_err(vtk_error)?;
+            vtk.write_frame(&frame)
+                .map_err(|e| vtk_error(e.to_string()))?;
         }
         sim.keep_last_good();
         state.last_good_step = sim.step_count();

@@ -9,13 +9,17 @@
 //! area `grains.csv` reports. `/scene` draws each contour as a triangle fan from its area
 //! centroid filled with the colour of its mean stress, outlined by a line loop.
 
-use super::{
-    Bodies, CdrReader, CdrResult, CdrWriter, IDENTITY_POSE, McapSettings, RunInfo,
-    TrajectoryWriter, WithPreamble, WriteError, add_channel, encode_box, json_line_loop,
-    json_point, length_decimals, scene_grains_start, scene_schema, stress_colour,
-    stress_colour_max,
+use super::cdr::{CdrReader, CdrResult, CdrWriter};
+use super::scene::{
+    IDENTITY_POSE, encode_box, json_line_loop, json_point, length_decimals, scene_grains_start,
+    stress_colour,
 };
+use super::schemas::scene_schema;
+use super::writer::{Bodies, RunInfo, WithPreamble, add_channel};
+use super::{McapSettings, TrajectoryWriter, WriteError};
 use crate::boundary::walls::Wall;
+use crate::output::colour::stress_colour_max;
+use crate::output::frame::FrameContour;
 use crate::output::measures::Measures;
 use crate::scenario::Scenario;
 use glam::DVec2;
@@ -49,42 +53,6 @@ pub const CONTOUR_SCENE_SCHEMA: &str = scene_schema!(
 "##,
     r##"{"type": "array", "items": {"$ref": "#/$defs/triangles"}}"##
 );
-
-/// One meshfree grain as logged: its deformed contour and mean stress.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct FrameContour {
-    /// Grain id (the line of `grains.csv`).
-    pub grain: u32,
-    /// Mean Cauchy stress (xx, yy, xy), global frame, tension positive.
-    pub stress: [f64; 3],
-    /// Mean stress, compression positive: `-(sxx + syy) / 2`.
-    pub mean_stress_c: f64,
-    /// The boundary nodes, counter-clockwise.
-    pub points: Vec<DVec2>,
-}
-
-impl FrameContour {
-    /// Area and area centroid of the polygon (the shoelace formula, as the solver computes
-    /// them for `grains.csv`).
-    pub fn area_centroid(&self) -> (f64, DVec2) {
-        let p = &self.points;
-        let n = p.len();
-        let (mut a2, mut cx, mut cy) = (0.0, 0.0, 0.0);
-        for k in 0..n {
-            let (a, b) = (p[k], p[(k + 1) % n]);
-            let cross = a.x * b.y - b.x * a.y;
-            a2 += cross;
-            cx += (a.x + b.x) * cross;
-            cy += (a.y + b.y) * cross;
-        }
-        (0.5 * a2, DVec2::new(cx / (3.0 * a2), cy / (3.0 * a2)))
-    }
-
-    /// Radius of the disc of the same area.
-    pub fn equivalent_radius(&self) -> f64 {
-        (self.area_centroid().0.abs() / std::f64::consts::PI).sqrt()
-    }
-}
 
 /// What the `sdem.run` metadata of a meshfree log says beyond the scenario.
 #[derive(Debug, Clone, Copy, PartialEq)]

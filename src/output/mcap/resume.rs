@@ -14,9 +14,10 @@
 //! time) is kept; everything after them is dropped.
 
 use super::contours::{ContourLogInfo, TOPIC_CONTOURS};
+use super::writer::WithPreamble;
 use super::{
     TOPIC_CONTACTS, TOPIC_GRAINS, TOPIC_MACRO, TOPIC_SCENE, TOPIC_WALLS, TrajectoryWriter,
-    WithPreamble, WriteError,
+    WriteError,
 };
 use crate::integration::World;
 use crate::output::mcap::McapSettings;
