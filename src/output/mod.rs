@@ -4,6 +4,7 @@
 //! the per-grain stresses of `grains.csv` are tension positive like everything in the library.
 
 pub mod files;
+pub mod lock;
 pub mod mcap;
 pub mod measures;
 pub mod plot;
