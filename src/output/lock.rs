@@ -17,10 +17,7 @@ pub const LOCK_FILE: &str = ".sdem.lock";
 /// Why an output directory cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum LockError {
-    #[error(
-        "output directory {dir}: cannot create it or write in it ({action}: {source}); \
-         choose a writable --out"
-    )]
+    #[error("cannot write in the output directory {dir} ({action})")]
     NotWritable {
         dir: String,
         action: &'static str,
