@@ -44,6 +44,9 @@ pub struct OutputLock {
 impl OutputLock {
     /// Creates `dir` if needed and takes its lock; fails at once (without waiting) when another
     /// process holds it, naming that process.
+    // `File::try_lock` is std's since Rust 1.89; the crate's `rust-version` (1.85) is older
+    // than what it needs already (let chains, 1.88), and the toolchain is 1.95.
+    #[allow(clippy::incompatible_msrv)]
     pub fn acquire(dir: &Path) -> Result<Self, LockError> {
         let not_writable = |action: &'static str| {
             move |source| LockError::NotWritable {
