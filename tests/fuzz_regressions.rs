@@ -121,3 +121,36 @@ fn a_chunk_record_past_the_chunk_end_stops_the_scan() {
         ),
     }
 }
+
+/// What the `sample_file` fuzz target calls: `Scenario::load_sample`'s parse and packing check
+/// against `scenarios/compaction30_prepare.ron`.
+fn check_sample_like_the_fuzz_target(text: &str) -> Result<(), String> {
+    let s = sdem::scenario::Scenario::parse(
+        include_str!("../scenarios/compaction30_prepare.ron"),
+        "compaction30_prepare.ron",
+    )
+    .unwrap();
+    let sample = sdem::sample::file::parse_grains(text, "fuzz.csv").map_err(|e| e.to_string())?;
+    sdem::sample::file::check_packing(
+        "fuzz.csv",
+        &sample,
+        s.sample.bounds(),
+        &s.secant_law(),
+        s.contact.resolution_deg,
+    )
+    .map_err(|e| e.to_string())
+}
+
+/// Found by the `sample_file` target: grains with radii of 1e-45 a millimetre apart made the
+/// neighbour grid's column count overflow (`usize::MAX + 1`: a panic with overflow checks; in
+/// release 0 columns, then an index out of bounds). The count saturates (and is capped).
+#[test]
+fn sample_inputs_that_crashed_the_fuzzer_do_not_panic() {
+    let files = inputs("sample_file");
+    assert!(!files.is_empty());
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let outcome = std::panic::catch_unwind(|| check_sample_like_the_fuzz_target(&text));
+        assert!(outcome.is_ok(), "panic on {}", path.display());
+    }
+}
