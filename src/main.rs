@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
+use sdem::output::lock::OutputLock;
 use sdem::output::mcap::{McapSettings, Trajectory};
 use sdem::output::plot::{MacroSeries, PlotFormat, plot_macro};
 use sdem::output::render::{RenderOptions, render_frame};
@@ -329,6 +330,8 @@ fn run(cli: Cli) -> Result<()> {
                 parsed.output.checkpoint,
             );
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join(&parsed.name));
+            // One run per output directory, and one that can be written, before anything runs.
+            let _lock = OutputLock::acquire(&out_dir)?;
             let pool = thread_pool(threads)?;
             let step_note = match parsed.model {
                 sdem::scenario::Model::Meshfree(m) => {
@@ -390,6 +393,7 @@ fn run(cli: Cli) -> Result<()> {
                 Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
                 _ => PathBuf::from("."),
             });
+            let _lock = OutputLock::acquire(&out_dir)?;
             let pool = thread_pool(threads)?;
             eprintln!(
                 "sdem: resuming {} at step {} (t = {:.4e}), {}, output in {}",

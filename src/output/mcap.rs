@@ -87,6 +87,11 @@ impl From<WriteError> for std::io::Error {
     fn from(e: WriteError) -> Self {
         match e {
             WriteError::Io { error, .. } => error,
+            // A full disk while writing the log: the I/O error itself (the caller names the file).
+            WriteError::Mcap {
+                error: mcap::McapError::Io(error),
+                ..
+            } => error,
             other => std::io::Error::other(other.to_string()),
         }
     }

@@ -6,6 +6,7 @@
 pub mod colour;
 pub mod files;
 pub mod frame;
+pub mod lock;
 pub mod mcap;
 pub mod measures;
 pub mod plot;

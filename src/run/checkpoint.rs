@@ -865,10 +865,15 @@ fn unframe<'b>(bytes: &'b [u8], path: &str) -> Result<(u32, &'b [u8]), Checkpoin
 /// directory.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let tmp = tmp_path(path);
-    {
-        let mut f = std::fs::File::create(&tmp)?;
+    let written = std::fs::File::create(&tmp).and_then(|mut f| {
         f.write_all(bytes)?;
-        f.sync_all()?;
+        f.sync_all()
+    });
+    if let Err(e) = written {
+        // A full disk (or a file size limit): the previous checkpoint at `path` is untouched;
+        // the partial temporary file goes.
+        std::fs::remove_file(&tmp).ok();
+        return Err(e);
     }
     std::fs::rename(&tmp, path)?;
     let dir = match path.parent() {

@@ -47,6 +47,16 @@ pub enum RunError {
         path: String,
         source: std::io::Error,
     },
+    /// Writing a checkpoint failed (e.g. a full disk): the file written before, if any, is left
+    /// as it was (checkpoints are written to a temporary file, then renamed over it).
+    #[error(
+        "writing the checkpoint {path} (the checkpoint written there before, if any, is left \
+         intact: `sdem resume` continues from it)"
+    )]
+    CheckpointWrite {
+        path: String,
+        source: std::io::Error,
+    },
     /// An instability of the SDEM step; `note` (empty, or a line starting with a newline) says which stress
     /// target the phase was heading for and the stress reached.
     #[error(

@@ -162,7 +162,10 @@ impl<'a> Run<'a> {
             state,
         };
         sim.write_checkpoint(&self.checkpoint_path, &record)
-            .map_err(io_error(&self.checkpoint_path))
+            .map_err(|source| RunError::CheckpointWrite {
+                path: self.checkpoint_path.display().to_string(),
+                source,
+            })
     }
 
     /// Ends the run on a failure: the last good state to `grains_last_good.csv`, the MCAP log

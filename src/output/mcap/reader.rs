@@ -431,18 +431,17 @@ impl Trajectory {
         SizeInfo {
             file_bytes: self.file_size,
             chunks: self.summary.chunk_indexes.len(),
+            // Saturating: the sizes are the file's word (a damaged index can say anything).
             compressed_bytes: self
                 .summary
                 .chunk_indexes
                 .iter()
-                .map(|c| c.compressed_size)
-                .sum(),
+                .fold(0u64, |a, c| a.saturating_add(c.compressed_size)),
             uncompressed_bytes: self
                 .summary
                 .chunk_indexes
                 .iter()
-                .map(|c| c.uncompressed_size)
-                .sum(),
+                .fold(0u64, |a, c| a.saturating_add(c.uncompressed_size)),
         }
     }
 
