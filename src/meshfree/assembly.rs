@@ -62,6 +62,15 @@ const STALL_CONTRACTION: f64 = 0.9;
 /// Halvings of a stalled Newton step tried before the full step is kept.
 const LINE_SEARCH_HALVINGS: usize = 8;
 
+/// A shortened Newton step ([`Assembly::shorter_newton_step`]): its length as a fraction of
+/// the full step, the iterate, its evaluation and residual norm.
+struct ShorterStep {
+    alpha: f64,
+    u: Vec<f64>,
+    eval: Evaluation,
+    norm: f64,
+}
+
 /// How a Newton loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum NewtonEnd {
@@ -1092,22 +1101,20 @@ impl Assembly {
                 };
                 lowest_norm = lowest_norm.min(norm);
                 if stalled_steps >= STALLED_STEPS_BEFORE_LINE_SEARCH {
-                    if let Some((alpha, shorter, shorter_eval, shorter_norm)) = self
-                        .shorter_newton_step(
-                            &start,
-                            &du,
-                            applied,
-                            previous_norm,
-                            multipliers,
-                            friction,
-                            k,
-                            dynamic,
-                        )?
-                    {
-                        *u = shorter;
-                        eval = shorter_eval;
-                        norm = shorter_norm;
-                        applied = alpha;
+                    if let Some(shorter) = self.shorter_newton_step(
+                        &start,
+                        &du,
+                        applied,
+                        previous_norm,
+                        multipliers,
+                        friction,
+                        k,
+                        dynamic,
+                    )? {
+                        *u = shorter.u;
+                        eval = shorter.eval;
+                        norm = shorter.norm;
+                        applied = shorter.alpha;
                         stalled_steps = 0;
                     }
                 }
@@ -1139,7 +1146,7 @@ impl Assembly {
         friction: Option<FrictionInput<'_>>,
         k: f64,
         dynamic: Option<&DynamicTerms>,
-    ) -> Result<Option<(f64, Vec<f64>, Evaluation, f64)>, MeshfreeError> {
+    ) -> Result<Option<ShorterStep>, MeshfreeError> {
         let mut alpha = applied;
         for _ in 0..LINE_SEARCH_HALVINGS {
             alpha *= 0.5;
@@ -1149,7 +1156,14 @@ impl Assembly {
             }
             let eval = self.evaluate_with(&trial, multipliers, friction, k, dynamic, false)?;
             match finite_residual_norm(&eval.residual) {
-                Ok(norm) if norm < norm_at_start => return Ok(Some((alpha, trial, eval, norm))),
+                Ok(norm) if norm < norm_at_start => {
+                    return Ok(Some(ShorterStep {
+                        alpha,
+                        u: trial,
+                        eval,
+                        norm,
+                    }));
+                }
                 _ => {}
             }
         }
