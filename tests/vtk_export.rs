@@ -120,22 +120,27 @@ fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
     (a - b).abs() <= rel * b.abs() + abs
 }
 
+/// Runs `scenario` into `dir` with its MCAP log at `log` and, with `vtk`, VTK files there.
+fn run_logged(scenario: &Scenario, dir: &Path, log: &Path, vtk: Option<&Path>) {
+    run_scenario(
+        scenario,
+        &RunOptions {
+            out_dir: dir.to_path_buf(),
+            mcap: Some(McapSettings::new(log)),
+            vtk: vtk.map(Path::to_path_buf),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+}
+
 #[test]
 fn a_run_and_its_log_export_files_that_vtk_reads_back() {
     let dir = temp_dir("run");
     let scenario = Scenario::parse(FRICTIONAL, "vtk_small.ron").unwrap();
     let log_path = dir.join("run.mcap");
     let run_vtk = dir.join("vtk_run");
-    run_scenario(
-        &scenario,
-        &RunOptions {
-            out_dir: dir.clone(),
-            mcap: Some(McapSettings::new(&log_path)),
-            vtk: Some(run_vtk.clone()),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    run_logged(&scenario, &dir, &log_path, Some(&run_vtk));
     let log = Trajectory::open(&log_path).unwrap();
     let frames = log.frame_count();
     assert!(frames >= 3, "{frames} frames");
@@ -306,16 +311,7 @@ fn a_periodic_run_draws_each_contact_to_the_nearest_image() {
     let scenario = Scenario::parse(&text, "vtk_periodic.ron").unwrap();
     let log_path = dir.join("run.mcap");
     let vtk = dir.join("vtk");
-    run_scenario(
-        &scenario,
-        &RunOptions {
-            out_dir: dir.clone(),
-            mcap: Some(McapSettings::new(&log_path)),
-            vtk: Some(vtk.clone()),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    run_logged(&scenario, &dir, &log_path, Some(&vtk));
     let log = Trajectory::open(&log_path).unwrap();
     let last = log.frame(-1).unwrap();
     let cell = last.cell.expect("a periodic log has a cell");
@@ -359,15 +355,7 @@ fn a_truncated_or_corrupt_log_gives_export_an_error_not_a_panic() {
     let dir = temp_dir("damaged");
     let scenario = Scenario::parse(FRICTIONAL, "vtk_small.ron").unwrap();
     let log_path = dir.join("good.mcap");
-    run_scenario(
-        &scenario,
-        &RunOptions {
-            out_dir: dir.clone(),
-            mcap: Some(McapSettings::new(&log_path)),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    run_logged(&scenario, &dir, &log_path, None);
     let bytes = std::fs::read(&log_path).unwrap();
     let export = |name: &str, data: &[u8]| {
         let path = dir.join(name);

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The friction benchmarks of the frictional soft-particle paper (seed 002 §5; issue #15), SDEM.
+"""The friction benchmarks of the frictional soft-particle paper (seed 002 §5; issue #15).
 
 Runs, from the shipped scenarios (finished runs are kept and skipped):
 - SDEM beside the 2D Hertz benchmark: the seed's disc between two plates, F(d) against
@@ -9,6 +9,8 @@ Runs, from the shipped scenarios (finished runs are kept and skipped):
 - the 30-disc compaction (compaction30_mu0.ron, compaction30_mu05.ron), quasi-static and at the
   paper's top-wall speed of 5 m/s: phi against log of the axial stress, and the grains' volume
   change ln(Vs/Vs0) = ln(phi/phi0) + ln(H/H0) against the true strain -ln(H/H0) (paper eq. 28);
+  and the same with the meshfree solver at 5 m/s (compaction30_meshfree_mu0.ron, ..._mu05.ron)
+  at each of --meshfree-nodes (contour nodes per disc; 32 by default, minutes per run);
 - samples A and B with mu = 0.5 between the grains (isotropic_{A,B}_friction.ron) beside the
   frictionless scenarios: the jamming point and p_c(phi).
 
@@ -93,6 +95,24 @@ def rolling(a, out):
     write_csv(out / "rolling.csv", rows)
     print_table("rolling disc (s at t = 20 ms)", rows)
 
+def compaction_curve(run_dir, width, height, grain_area):
+    """(true strain, phi, syy_c, ln(Vs/Vs0)) for each macro.csv row of a compaction run that
+    started at box height `height` with grains of total area `grain_area`."""
+    pts = []
+    for r in rows_of(run_dir):
+        h, phi, syy = float(r["box_height"]), float(r["phi"]), float(r["syy_c"])
+        pts.append((-math.log(h / height), phi, syy, math.log(phi * width * h / grain_area)))
+    return pts
+
+
+def compaction_row(mu, kind, pts, cpu):
+    """The table row of a compaction run: its last point."""
+    last = pts[-1]
+    return {"mu": "0.5" if mu == "05" else "0", "loading": kind,
+            "true_strain": f"{last[0]:.4f}", "phi": f"{last[1]:.5f}",
+            "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}", "cpu_s": f"{cpu:.2f}"}
+
+
 def compaction(a, out):
     """The 30-disc compaction, quasi-static and at 5 m/s, mu = 0 and 0.5."""
     curves = {}
@@ -114,18 +134,8 @@ def compaction(a, out):
             name = f"mu{mu}_{name}"
             run_dir = out / "compaction30" / name
             cpu = run(a.sdem, run_dir, text, ["compaction30_grains.csv"])
-            data = rows_of(run_dir)
-            pts = []
-            for r in data:
-                h, phi, syy = float(r["box_height"]), float(r["phi"]), float(r["syy_c"])
-                strain = -math.log(h / height)
-                pts.append((strain, phi, syy, math.log(phi * width * h / grain_area)))
-            curves[(mu, kind)] = pts
-            last = pts[-1]
-            rows.append({"mu": "0.5" if mu == "05" else "0", "loading": kind,
-                         "true_strain": f"{last[0]:.4f}", "phi": f"{last[1]:.5f}",
-                         "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}",
-                         "cpu_s": f"{cpu:.2f}"})
+            curves[(mu, kind)] = compaction_curve(run_dir, width, height, grain_area)
+            rows.append(compaction_row(mu, kind, curves[(mu, kind)], cpu))
     gain = float(rows[3]["phi"]) - float(rows[0]["phi"])
     # The meshfree solver at the same wall speed (5 m/s), for each nodal density asked.
     with open(SCENARIOS / "compaction30_meshfree_grains.csv") as f:
@@ -138,18 +148,9 @@ def compaction(a, out):
             text = text.replace("boundary_nodes: 32,", f"boundary_nodes: {nodes},")
             run_dir = out / "compaction30" / f"meshfree{nodes}_mu{mu}"
             cpu = run(a.sdem, run_dir, text, ["compaction30_meshfree_grains.csv"])
-            pts = []
-            for r in rows_of(run_dir):
-                h, phi, syy = float(r["box_height"]), float(r["phi"]), float(r["syy_c"])
-                pts.append((-math.log(h / height), phi, syy,
-                            math.log(phi * width * h / polygon_area)))
             kind = f"meshfree {nodes} nodes, 5 m/s"
-            curves[(mu, kind)] = pts
-            last = pts[-1]
-            rows.append({"mu": "0.5" if mu == "05" else "0", "loading": kind,
-                         "true_strain": f"{last[0]:.4f}", "phi": f"{last[1]:.5f}",
-                         "syy_c_Pa": f"{last[2]:.4e}", "ln_Vs_Vs0": f"{last[3]:.4f}",
-                         "cpu_s": f"{cpu:.2f}"})
+            curves[(mu, kind)] = compaction_curve(run_dir, width, height, polygon_area)
+            rows.append(compaction_row(mu, kind, curves[(mu, kind)], cpu))
         print(f"compaction30_phi_gain_with_friction_meshfree{nodes} = "
               f"{float(rows[-1]['phi']) - float(rows[-2]['phi'])}")
     write_csv(out / "compaction30.csv", rows)
