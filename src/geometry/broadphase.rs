@@ -123,18 +123,13 @@ impl NeighborList {
             hi = hi.max(*c);
         }
         // At most max(4 n, 2^16) cells: grains far apart for their size (a sparse or absurd
-        // sample, e.g. radii of 1e-45 in a sample file) would otherwise ask for up to 2^30. A
-        // coarser grid finds the same pairs (each list is sorted), so results do not change.
+        // sample, e.g. radii of 1e-45 in a sample file) would otherwise ask for up to 2^30, and
+        // their quotients below would overflow usize. A coarser grid finds the same pairs (each
+        // list is sorted), so results do not change.
         let side = ((4 * n).max(1 << 16) as f64).sqrt().floor() - 1.0;
         cell = cell.max((hi.x - lo.x) / side).max((hi.y - lo.y) / side);
-        // Saturating: grains far apart for their size (e.g. radii of 1e-45 in a sample file)
-        // give a quotient beyond usize, which the cast saturates.
-        let cols = (((hi.x - lo.x) / cell) as usize)
-            .saturating_add(1)
-            .min(1 << 15);
-        let rows = (((hi.y - lo.y) / cell) as usize)
-            .saturating_add(1)
-            .min(1 << 15);
+        let cols = (((hi.x - lo.x) / cell) as usize + 1).min(1 << 15);
+        let rows = (((hi.y - lo.y) / cell) as usize + 1).min(1 << 15);
         let cell_of = |c: DVec2| -> (usize, usize) {
             let cx = (((c.x - lo.x) / cell) as usize).min(cols - 1);
             let cy = (((c.y - lo.y) / cell) as usize).min(rows - 1);
