@@ -48,6 +48,20 @@ fn grain_wall_contact(bencher: divan::Bencher) {
     bencher.bench(|| grain_wall(&table, black_box(&g), DVec2::ZERO, DVec2::Y));
 }
 
+/// The closed-form contacts of rigid discs (issue #16), at the same overlaps as the polygons.
+#[divan::bench(args = [0.01, 0.05, 0.15])]
+fn disc_disc(bencher: divan::Bencher, depth: f64) {
+    let (ci, cj) = (DVec2::ZERO, DVec2::new(0.024 * (1.0 - depth), 0.001));
+    bencher
+        .bench(|| sdem::geometry::circle::disc_disc(black_box(ci), 0.012, black_box(cj), 0.0121));
+}
+
+#[divan::bench]
+fn disc_wall(bencher: divan::Bencher) {
+    let c = DVec2::new(0.0, 0.011);
+    bencher.bench(|| sdem::geometry::circle::disc_wall(black_box(c), 0.012, DVec2::ZERO, DVec2::Y));
+}
+
 #[divan::bench(args = [1000, 10000], sample_count = 20)]
 fn step_dense_packing(bencher: divan::Bencher, grains: usize) {
     let mut world = sdem::run::bench::dense_packing(grains, 1.0);
@@ -99,4 +113,17 @@ mod sparse_lu {
             s.solve_factored(&mut x).unwrap();
         });
     }
+}
+
+/// The whole step with every grain a rigid disc (closed-form contacts).
+#[divan::bench(args = [1000, 10000], sample_count = 20)]
+fn step_dense_packing_rigid(bencher: divan::Bencher, grains: usize) {
+    let mut world = sdem::run::bench::dense_packing(grains, 1.0);
+    sdem::run::bench::with_model(&mut world, sdem::grain::ModelLevel::Rigid);
+    world.step().unwrap();
+    bencher
+        .counter(divan::counter::ItemsCount::new(world.grains.len()))
+        .bench_local(|| {
+            world.step().unwrap();
+        });
 }

@@ -89,7 +89,8 @@ enum Command {
         #[arg(long, value_name = "S", value_parser = parse_seconds, conflicts_with = "checkpoint_every", allow_negative_numbers = true)]
         checkpoint_every_seconds: Option<f64>,
     },
-    /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree).
+    /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree), at the full
+    /// SDEM level or (`--model`) another.
     Bench {
         /// Number of grains (rounded up to full lattice rows).
         #[arg(long, default_value_t = 10_000)]
@@ -105,6 +106,10 @@ enum Command {
         /// Coulomb friction coefficient of every contact (0: frictionless).
         #[arg(long, default_value_t = 0.0)]
         friction: f64,
+        /// Model level of every grain: rigid discs (closed-form circle contacts), discs with one
+        /// volumetric strain, or the full SDEM grain.
+        #[arg(long, value_enum, default_value_t = BenchModel::Full)]
+        model: BenchModel,
     },
     /// Fit the secant contact law (a, b) to single-grain meshfree compressions (SPEC §10):
     /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg. With
@@ -224,6 +229,24 @@ enum Command {
         #[arg(long)]
         svg: bool,
     },
+}
+
+/// `sdem bench --model`: the model level of every grain.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum BenchModel {
+    Rigid,
+    Volumetric,
+    Full,
+}
+
+impl BenchModel {
+    fn level(self) -> sdem::grain::ModelLevel {
+        match self {
+            Self::Rigid => sdem::grain::ModelLevel::Rigid,
+            Self::Volumetric => sdem::grain::ModelLevel::Volumetric,
+            Self::Full => sdem::grain::ModelLevel::Full,
+        }
+    }
 }
 
 /// A rectangle of the sample, `(lower left, upper right)`.
@@ -431,6 +454,7 @@ fn run(cli: Cli) -> Result<()> {
             threads,
             resolution,
             friction,
+            model,
         } => {
             if grains < 4 || steps == 0 {
                 bail!("--grains must be at least 4 and --steps at least 1");
@@ -441,13 +465,15 @@ fn run(cli: Cli) -> Result<()> {
             let pool = thread_pool(threads)?;
             let result = pool.install(|| {
                 let mut world = sdem::run::bench::dense_packing(grains, resolution);
+                sdem::run::bench::with_model(&mut world, model.level());
                 if friction > 0.0 {
                     sdem::run::bench::with_friction(&mut world, friction);
                 }
                 sdem::run::bench::run_bench(&mut world, 20, steps)
             })?;
             println!(
-                "grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
+                "model: {:?}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
+                model.level(),
                 result.grains,
                 result.steps,
                 pool.current_num_threads(),

@@ -56,8 +56,61 @@ fn a_step_well_above_the_critical_estimate_is_stopped_with_a_diagnostic() {
 fn rigid_grains_conserve_energy_to_the_integrators_order() {
     // Expectation: level 0 without damping is a conservative system (the secant-law force
     // derives from the contact geometry alone); symplectic Euler keeps the energy to O(dt), so
-    // the kinetic energy after a burst of collisions, once no contact is active, differs from
-    // the initial one by an error that halves when dt halves.
+    // the kinetic energy after a collision, once no contact is active, differs from the initial
+    // one by an error that at least halves when dt halves.
+    //
+    // Rigid discs meet in closed form (exact circles, issue #16), and there the error of one
+    // collision falls faster than dt (about dt^2) and takes either sign. The order is therefore
+    // checked on single collisions, a disc on a disc and a disc on a wall; a gas of 25 grains,
+    // whose chaotic collisions sum such errors with random signs (1.3e-4 at 0.4 and at 0.2 of
+    // the critical step, 1.8e-3 at 0.3), is checked for a small error at both steps.
+    let collision = |fraction: f64, wall: bool| {
+        let material = Material {
+            young: 1.0,
+            poisson: 0.3,
+            density: 1.0,
+        };
+        let mut params = Parameters::new(material, 0.0);
+        params.level = ModelLevel::Rigid;
+        params.contact_damping = 0.0;
+        params.dt = fraction * critical_time_step(&material, &params.law, 0.01, params.level);
+        let mut world = if wall {
+            let mut g = Grain::at_rest(DVec2::new(0.5, 0.02), 0.01);
+            g.velocity = DVec2::new(0.003, -0.01);
+            World::new(params, vec![g], box_walls(0.0, 1.0, 0.0, 1.0))
+        } else {
+            let mut a = Grain::at_rest(DVec2::new(0.0, 0.0), 0.01);
+            let mut b = Grain::at_rest(DVec2::new(0.025, 0.003), 0.012);
+            a.velocity = DVec2::new(0.01, 0.0);
+            b.velocity = DVec2::new(-0.01, 0.0);
+            World::new(params, vec![a, b], Vec::new())
+        };
+        let energy = |w: &World| w.grains.iter().map(|g| g.kinetic_energy(1.0)).sum::<f64>();
+        let initial = energy(&world);
+        let (mut touched, mut open) = (false, false);
+        while !open {
+            world.step().unwrap();
+            let contacts = world.totals.contacts
+                + world
+                    .grain_stress
+                    .iter()
+                    .map(|s| s.wall_contacts as u64)
+                    .sum::<u64>();
+            touched |= contacts > 0;
+            open = touched && contacts == 0;
+            assert!(world.time < 10.0, "no collision");
+        }
+        (energy(&world) - initial).abs() / initial
+    };
+    for wall in [false, true] {
+        let errors = [0.4, 0.2, 0.1].map(|f| collision(f, wall));
+        eprintln!("one collision (wall: {wall}): relative kinetic-energy errors {errors:?}");
+        assert!(errors[0] < 0.05, "energy error {}", errors[0]);
+        assert!(
+            errors[1] < 0.5 * errors[0] && errors[2] < 0.5 * errors[1],
+            "{errors:?}"
+        );
+    }
     let run = |fraction: f64| {
         let material = Material {
             young: 1.0,
@@ -102,8 +155,10 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
     eprintln!(
         "relative kinetic-energy error: {coarse:.3e} at 0.4 dt_crit, {fine:.3e} at 0.2 dt_crit"
     );
-    assert!(coarse < 0.05, "energy error {coarse}");
-    assert!(fine < 0.7 * coarse, "no convergence: {coarse} -> {fine}");
+    assert!(
+        coarse < 1e-2 && fine < 1e-2,
+        "energy error {coarse} -> {fine}"
+    );
 }
 
 /// A 300-grain compaction of compressible grains (nu = 0.45) from the loose state to phi = 0.90

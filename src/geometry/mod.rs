@@ -1,7 +1,9 @@
 //! Geometry: contour polygons of deformed grains, their intersections with each other and with
-//! walls, and the broad phase that finds the candidate pairs.
+//! walls, the closed forms of the same contacts for exact circles (rigid discs), and the broad
+//! phase that finds the candidate pairs.
 
 pub mod broadphase;
+pub mod circle;
 pub mod contour;
 pub mod intersection;
 

@@ -27,6 +27,7 @@ use crate::boundary::walls::Wall;
 use crate::contact::friction::TangentialResponse;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
+use crate::geometry::circle::{disc_disc, disc_wall};
 use crate::geometry::{
     ContourTable, GrainShape, Overlap, PairHint, grain_grain_hinted, grain_wall,
 };
@@ -52,9 +53,38 @@ pub struct Frame {
     /// Velocity gradient of the grain's affine motion (see [`Grain::velocity_gradient`]).
     pub velocity_gradient: DMat2,
     pub mass: f64,
+    /// The grain is an exact circle of radius `shape.bounding_radius` (a grain at the rigid
+    /// level whose strains are equal: a disc, or one held at a volumetric strain). Its contacts
+    /// with walls and with other such grains take the closed forms of
+    /// [`circle`](crate::geometry::circle) instead of the contour polygon (issue #16).
+    pub circle: bool,
 }
 
 impl Frame {
+    /// The frame of a rigid grain whose strains are equal: a circle of radius `R (1 + eps)`.
+    ///
+    /// Its contour polygon, needed only where it meets a grain that is not a circle, is laid
+    /// unrotated (node k at the angle `k dbeta` whatever theta): an inscribed polygon of a circle
+    /// has no material orientation to follow, and so the frame needs no sine or cosine. Its
+    /// velocity field is the rigid rotation `omega J` (a rigid grain's strain rates are zero).
+    #[inline]
+    pub fn of_circle(grain: &Grain, density: f64) -> Self {
+        let radius = grain.radius * (1.0 + grain.eps1);
+        let rotation_rate = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::new(-1.0, 0.0));
+        Frame {
+            shape: GrainShape {
+                center: grain.center,
+                map: DMat2::from_diagonal(DVec2::splat(radius)),
+                inv_map: DMat2::from_diagonal(DVec2::splat(1.0 / radius)),
+                bounding_radius: radius,
+            },
+            velocity: grain.velocity,
+            velocity_gradient: rotation_rate * grain.omega,
+            mass: grain.mass(density),
+            circle: true,
+        }
+    }
+
     /// Velocity of the material point of this grain at x.
     #[inline]
     pub fn velocity_at(&self, x: DVec2) -> DVec2 {
@@ -376,14 +406,19 @@ impl World {
         let density = self.params.material.density;
         self.grains
             .par_iter()
+            .zip(self.levels.par_iter())
             .with_min_len(GRAIN_CHUNK)
-            .map(|g| {
+            .map(|(g, level)| {
+                if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
+                    return Frame::of_circle(g, density);
+                }
                 let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
                 Frame {
                     shape,
                     velocity: g.velocity,
                     velocity_gradient,
                     mass: g.mass(density),
+                    circle: false,
                 }
             })
             .collect_into_vec(&mut self.frames);
@@ -477,7 +512,16 @@ impl World {
                     let mut hint = slot.hint;
                     let history = slot.tangential_history;
                     *slot = PairContact::default();
-                    let overlap = grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint);
+                    let overlap = if fi.circle && fj.circle {
+                        disc_disc(
+                            fi.shape.center,
+                            fi.shape.bounding_radius,
+                            shape_j.center,
+                            shape_j.bounding_radius,
+                        )
+                    } else {
+                        grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
+                    };
                     slot.hint = hint;
                     match overlap {
                         Overlap::Separate => {}
@@ -640,7 +684,13 @@ impl World {
                         if wall.height(frame.shape.center) >= frame.shape.bounding_radius {
                             continue;
                         }
-                        match grain_wall(table, &frame.shape, wall.point, wall.normal) {
+                        let overlap = if frame.circle {
+                            let shape = &frame.shape;
+                            disc_wall(shape.center, shape.bounding_radius, wall.point, wall.normal)
+                        } else {
+                            grain_wall(table, &frame.shape, wall.point, wall.normal)
+                        };
+                        match overlap {
                             Overlap::Separate => {}
                             Overlap::Swallowed => {
                                 sums.failure.get_or_insert(Instability::Swallowed {
@@ -813,6 +863,8 @@ impl World {
             .par_iter_mut()
             .with_min_len(GRAIN_CHUNK)
             .for_each(|g| g.center = to_lo + (g.center - from_lo) * scale);
+        self.neighbors
+            .follow_affine((from_lo, from_hi), (to_lo, to_hi));
     }
 
     /// Coordination numbers (z, z_nr, z_nr3) of the last step: `2C/N` over grain–grain
@@ -909,14 +961,21 @@ fn advance_grain(
     let lost_fraction = load.lost_area / reference_area;
     let current_area = grain.ellipse_area() - load.lost_area;
 
-    // Love–Weber stress (eq. 47) and its components in the principal frame {e1, e2}.
+    // Love–Weber stress (eq. 47) and its components in the principal frame {e1, e2}, which only
+    // a deforming grain needs (a rigid one skips the sine and cosine of theta + alpha).
     let symmetric = 0.5 * (load.moment + load.moment.transpose());
     let external = symmetric * (1.0 / current_area.max(f64::MIN_POSITIVE));
-    let e1 = grain.principal_direction();
-    let e2 = e1.perp();
-    let ext11 = e1.dot(external * e1);
-    let ext22 = e2.dot(external * e2);
-    let ext12 = e1.dot(external * e2);
+    let (ext11, ext22, ext12) = if level.level == ModelLevel::Rigid {
+        (0.0, 0.0, 0.0)
+    } else {
+        let e1 = grain.principal_direction();
+        let e2 = e1.perp();
+        (
+            e1.dot(external * e1),
+            e2.dot(external * e2),
+            e1.dot(external * e2),
+        )
+    };
     let (sigma1, sigma2) = principal_stress(material, grain.eps1, grain.eps2, lost_fraction);
     let stress = GrainStress {
         external: [external.x_axis.x, external.y_axis.y, external.y_axis.x],

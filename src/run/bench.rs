@@ -3,11 +3,12 @@
 //! The packing is a triangular lattice of spacing s = 0.024 (sample A's mean diameter) whose
 //! grains have radii uniform in [1.01, 1.06] s/2: every grain overlaps its six neighbours by 1–6%
 //! of a radius, as in a jammed packing a little above jamming (phi ~ 0.9 once the grains have
-//! taken their contact flats). nu = 0.5, dbeta = 1°, walls at rest half a spacing away.
+//! taken their contact flats). nu = 0.5, dbeta = 1°, walls at rest half a spacing away. The grains
+//! are at the full SDEM level unless [`with_model`] says otherwise.
 
 use crate::boundary::walls::box_walls;
 use crate::contact::friction::FrictionSettings;
-use crate::grain::{Grain, Material};
+use crate::grain::{Grain, GrainLevel, Material, ModelLevel};
 use crate::integration::parameters::{Friction, critical_time_step, frictional_critical_time_step};
 use crate::integration::{Instability, Parameters, World};
 use crate::sample::{RadiusDistribution, unit_random};
@@ -68,6 +69,17 @@ pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
     params.resolution_deg = resolution_deg;
     params.dt = 0.4 * critical_time_step(&material, &params.law, 0.5 * spacing, params.level);
     World::new(params, list, box_walls(0.0, width, 0.0, height))
+}
+
+/// Puts every grain of a [`dense_packing`] at the model level `level` (a rigid disc, a disc with
+/// one volumetric strain, or the full SDEM grain), with the time step at the same fraction of
+/// that level's critical step. Rigid discs take the closed-form circle contacts.
+pub fn with_model(world: &mut World, level: ModelLevel) {
+    let p = &mut world.params;
+    p.level = level;
+    p.dt = 0.4 * critical_time_step(&p.material, &p.law, 0.5 * SPACING, level);
+    let levels = vec![GrainLevel::new(level); world.grains.len()];
+    world.set_levels(&levels);
 }
 
 /// Makes every contact of a [`dense_packing`] frictional (grains and walls, `K_t = K_n`, no
