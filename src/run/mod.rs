@@ -207,17 +207,25 @@ pub fn build_world(scenario: &Scenario) -> Result<World, RunError> {
     let (x0, y0) = s.origin;
     let grains = match (&s.loaded, s.spec()) {
         (Some(loaded), _) => loaded.grains.clone(),
-        (None, Some(spec)) => sample::generate(&spec, scenario.seed)?
-            .iter()
-            .map(|p| {
-                let center = if (x0, y0) == (0.0, 0.0) {
-                    DVec2::new(p.x, p.y)
-                } else {
-                    DVec2::new(x0 + p.x, y0 + p.y)
-                };
-                Grain::at_rest(center, p.radius)
-            })
-            .collect(),
+        (None, Some(spec)) => {
+            let placed = sample::generate(&spec, scenario.seed)?;
+            // Numbered along a Hilbert curve, not in placement order: neighbours then sit close
+            // in memory, which makes the step 2.5-3 times faster at 10^5 grains
+            // (sample::order). A sample file keeps the numbering its author gave.
+            let points: Vec<(f64, f64)> = placed.iter().map(|p| (p.x, p.y)).collect();
+            sample::order::hilbert_order(&points, spec.box_width, spec.box_height)
+                .into_iter()
+                .map(|k| {
+                    let p = &placed[k];
+                    let center = if (x0, y0) == (0.0, 0.0) {
+                        DVec2::new(p.x, p.y)
+                    } else {
+                        DVec2::new(x0 + p.x, y0 + p.y)
+                    };
+                    Grain::at_rest(center, p.radius)
+                })
+                .collect()
+        }
         (None, None) => {
             return Err(RunError::Setup(format!(
                 "scenario {}: sample.file {:?} has not been read (Scenario::load reads it)",

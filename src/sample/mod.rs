@@ -40,6 +40,7 @@
 
 pub mod file;
 mod math;
+pub mod order;
 mod placement;
 mod radii;
 
