@@ -52,6 +52,21 @@ fn a_step_well_above_the_critical_estimate_is_stopped_with_a_diagnostic() {
     }
 }
 
+/// Rigid grains (nu = 0.3) without contact damping, at `fraction` of the critical step of
+/// grains of radius 0.01.
+fn undamped_rigid(fraction: f64) -> Parameters {
+    let material = Material {
+        young: 1.0,
+        poisson: 0.3,
+        density: 1.0,
+    };
+    let mut params = Parameters::new(material, 0.0);
+    params.level = ModelLevel::Rigid;
+    params.contact_damping = 0.0;
+    params.dt = fraction * critical_time_step(&material, &params.law, 0.01, params.level);
+    params
+}
+
 #[test]
 fn rigid_grains_conserve_energy_to_the_integrators_order() {
     // Expectation: level 0 without damping is a conservative system (the secant-law force
@@ -65,15 +80,7 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
     // whose chaotic collisions sum such errors with random signs (1.3e-4 at 0.4 and at 0.2 of
     // the critical step, 1.8e-3 at 0.3), is checked for a small error at both steps.
     let collision = |fraction: f64, wall: bool| {
-        let material = Material {
-            young: 1.0,
-            poisson: 0.3,
-            density: 1.0,
-        };
-        let mut params = Parameters::new(material, 0.0);
-        params.level = ModelLevel::Rigid;
-        params.contact_damping = 0.0;
-        params.dt = fraction * critical_time_step(&material, &params.law, 0.01, params.level);
+        let params = undamped_rigid(fraction);
         let mut world = if wall {
             let mut g = Grain::at_rest(DVec2::new(0.5, 0.02), 0.01);
             g.velocity = DVec2::new(0.003, -0.01);
@@ -112,15 +119,7 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
         );
     }
     let run = |fraction: f64| {
-        let material = Material {
-            young: 1.0,
-            poisson: 0.3,
-            density: 1.0,
-        };
-        let mut params = Parameters::new(material, 0.0);
-        params.level = ModelLevel::Rigid;
-        params.contact_damping = 0.0;
-        params.dt = fraction * critical_time_step(&material, &params.law, 0.01, params.level);
+        let params = undamped_rigid(fraction);
         // A dilute gas: 5 x 5 grains in a box, random velocities.
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(5);
         let mut next = || sdem::sample::unit_random(&mut rng) - 0.5;

@@ -135,15 +135,9 @@ pub fn disc_wall(center: DVec2, radius: f64, wall_point: DVec2, wall_normal: DVe
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::intersection::tests::contact;
     use crate::geometry::{ContourTable, GrainShape, grain_grain, grain_wall};
     use std::f64::consts::PI;
-
-    fn contact(o: Overlap) -> ContactGeometry {
-        match o {
-            Overlap::Contact(c) => c,
-            other => panic!("expected a contact, got {other:?}"),
-        }
-    }
 
     #[test]
     fn segment_area_matches_the_direct_formula_and_the_half_disc() {

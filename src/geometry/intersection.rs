@@ -587,11 +587,12 @@ pub fn grain_wall(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    fn contact(o: Overlap) -> ContactGeometry {
+    /// The contact geometry of an overlap that must be a contact (for the geometry tests).
+    pub(in crate::geometry) fn contact(o: Overlap) -> ContactGeometry {
         match o {
             Overlap::Contact(c) => c,
             other => panic!("expected a contact, got {other:?}"),

@@ -448,7 +448,13 @@ impl World {
         };
         if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
-            let old_contacts = std::mem::take(&mut self.pair_contacts);
+            // Only a pair's search hint and tangential spring carry over: keeping them alone,
+            // and freeing the old contact records before the new ones exist, lowers the memory
+            // peak of a rebuild (it was a third of a world's memory at 10^6 grains).
+            let carried: Vec<(PairHint, f64)> = std::mem::take(&mut self.pair_contacts)
+                .iter()
+                .map(|c| (c.hint, c.tangential_history))
+                .collect();
             match &cell {
                 Some(cell) => self.neighbors.build_periodic(centers, reach, cell),
                 None => self.neighbors.build(centers, reach),
@@ -462,8 +468,7 @@ impl World {
                     k += 1;
                 }
                 if k < old_pairs.len() && old_pairs[k] == *pair {
-                    slot.hint = old_contacts[k].hint;
-                    slot.tangential_history = old_contacts[k].tangential_history;
+                    (slot.hint, slot.tangential_history) = carried[k];
                 }
             }
         }

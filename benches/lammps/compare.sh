@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# sdem against LAMMPS, back to back on this machine (issue #16): ROUNDS alternated rounds of
+# LAMMPS gran/hooke (1 and 2 processes) and `sdem bench` (full and rigid, 1 and 2 threads).
+#   usage: benches/lammps/compare.sh N LAMMPS_STEPS SDEM_STEPS [ROUNDS] [path/to/sdem]
+#   e.g.   benches/lammps/compare.sh 100000 1000 100 3
+# Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
+# packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/.
+set -eu
+here=$(cd "$(dirname "$0")" && pwd)
+n=$1; lsteps=$2; ssteps=$3; rounds=${4:-3}
+sdem=$(realpath "${5:-$here/../../target/release/sdem}")
+command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
+mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
+[ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
+[ -f dense_$n.data ] || mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
+  -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
+for r in $(seq 1 "$rounds"); do
+  for np in 1 2; do
+    pre=""; [ "$np" = 2 ] && pre="mpirun --allow-run-as-root -np 2"
+    $pre lmp -log log.bench_${n}_np${np}_r$r -screen none -in in.bench -var tag "$n" -var nsteps "$lsteps" -var mode hold
+    awk -v np="$np" -v n="$n" -v r="$r" '/^Loop time/ {v = $9*n/$4} END {printf "LAMMPS np=%s N=%s round=%s atom-steps/s: %.4e\n", np, n, r, v}' log.bench_${n}_np${np}_r$r
+  done
+  for model in full rigid; do
+    for t in 1 2; do
+      out=$("$sdem" bench --grains "$n" --steps "$ssteps" --threads "$t" --model "$model")
+      echo "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+    done
+  done
+done
