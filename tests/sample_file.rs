@@ -3,6 +3,8 @@
 //! checkpoints; a stress target the packing cannot reach ends the run with an error naming the
 //! target and the stress reached. An old (version 1) checkpoint still reads.
 
+mod common;
+
 use sdem::run::checkpoint::Checkpoint;
 use sdem::run::{RunError, RunOptions, build_world, resume_run, run_scenario};
 use sdem::scenario::Scenario;
@@ -22,10 +24,7 @@ Scenario(
 "#;
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdem-sample-file-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::temp_dir("sample-file", name)
 }
 
 fn options(out: &Path) -> RunOptions {

@@ -10,6 +10,8 @@
 //! cargo test --release --test vtk_export
 //! ```
 
+mod common;
+
 use sdem::output::mcap::{McapSettings, Trajectory};
 use sdem::run::{RunOptions, run_scenario};
 use sdem::scenario::Scenario;
@@ -32,10 +34,7 @@ Scenario(
 "#;
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdem-vtk-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::temp_dir("vtk", name)
 }
 
 fn sdem() -> Command {

@@ -67,12 +67,7 @@ impl NeighborList {
             return true;
         }
         let contraction = (1.0 - self.affine_scale.min_element()).max(0.0);
-        let budget = if contraction > 0.0 {
-            let max_reach = reach.iter().cloned().fold(0.0, f64::max);
-            0.5 * (self.skin - contraction * (2.0 * max_reach + self.skin))
-        } else {
-            0.5 * self.skin
-        };
+        let budget = self.displacement_budget(contraction, reach);
         if budget <= 0.0 {
             return true;
         }
@@ -92,6 +87,17 @@ impl NeighborList {
             .with_min_len(4096)
             .for_each(|c| *c = to.0 + (*c - from.0) * scale);
         self.affine_scale *= scale;
+    }
+
+    /// How far (displacement plus growth) every grain may still move before a pair not listed
+    /// could close its gap, after a homogeneous deformation of norm `strain` since the build:
+    /// `(skin - strain (2 max reach + skin)) / 2`; half the skin without deformation.
+    fn displacement_budget(&self, strain: f64, reach: &[f64]) -> f64 {
+        if strain == 0.0 {
+            return 0.5 * self.skin;
+        }
+        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        0.5 * (self.skin - strain * (2.0 * max_reach + self.skin))
     }
 
     /// Whether some grain's displacement since the build (`displacement(centre, reference)`)
@@ -136,8 +142,7 @@ impl NeighborList {
         }
         let strain = cell.matrix() * reference_matrix.inverse() - DMat2::IDENTITY;
         let strain_norm = strain.x_axis.length_squared() + strain.y_axis.length_squared();
-        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
-        let budget = 0.5 * (self.skin - strain_norm.sqrt() * (2.0 * max_reach + self.skin));
+        let budget = self.displacement_budget(strain_norm.sqrt(), reach);
         if budget <= 0.0 {
             return true;
         }

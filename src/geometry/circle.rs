@@ -14,14 +14,6 @@
 use super::intersection::{ContactGeometry, Overlap};
 use glam::DVec2;
 
-/// Area of the segment of a circle of radius `radius` cut off by a chord at depth `depth`
-/// (`0 <= depth <= 2 radius`) below the circle's outermost point.
-#[inline]
-pub fn segment_area(radius: f64, depth: f64) -> f64 {
-    let half_chord = (depth * (2.0 * radius - depth)).max(0.0).sqrt();
-    chord_segment_area(radius, radius - depth, half_chord)
-}
-
 /// Area of the segment cut off a circle of radius `radius` by a chord at signed distance
 /// `distance` from the centre (towards the segment) whose half length is `half_chord`
 /// (`distance^2 + half_chord^2 = radius^2`): `R^2 (theta - sin theta cos theta)`, theta the
@@ -135,9 +127,15 @@ pub fn disc_wall(center: DVec2, radius: f64, wall_point: DVec2, wall_normal: DVe
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::intersection::tests::contact;
+    use crate::geometry::intersection::tests::{contact, segment_area as direct_segment_area};
     use crate::geometry::{ContourTable, GrainShape, grain_grain, grain_wall};
     use std::f64::consts::PI;
+
+    /// [`chord_segment_area`] of the cap of depth `depth` (`0 <= depth <= 2 radius`).
+    fn segment_area(radius: f64, depth: f64) -> f64 {
+        let half_chord = (depth * (2.0 * radius - depth)).max(0.0).sqrt();
+        chord_segment_area(radius, radius - depth, half_chord)
+    }
 
     #[test]
     fn segment_area_matches_the_direct_formula_and_the_half_disc() {
@@ -147,8 +145,7 @@ mod tests {
         assert!((segment_area(r, r) - 0.5 * PI * r * r).abs() < 1e-14);
         assert!((segment_area(r, 2.0 * r) - PI * r * r).abs() < 1e-13);
         for depth in [1e-3, 4e-3, 1e-2, 0.1, 0.5, 1.2, 3.0] {
-            let direct =
-                r * r * (1.0 - depth / r).acos() - (r - depth) * (depth * (2.0 * r - depth)).sqrt();
+            let direct = direct_segment_area(r, depth);
             let rel = (segment_area(r, depth) - direct).abs() / direct;
             assert!(
                 rel < 1e-9,

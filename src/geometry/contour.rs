@@ -273,6 +273,9 @@ pub fn rotation(sin: f64, cos: f64) -> DMat2 {
     DMat2::from_cols(DVec2::new(cos, sin), DVec2::new(-sin, cos))
 }
 
+/// `J`, the rotation by 90 degrees: a rigid spin omega has the velocity gradient `omega J`.
+pub const QUARTER_TURN: DMat2 = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::new(-1.0, 0.0));
+
 /// The symmetric stretch `U = I + Q(alpha) diag(eps1, eps2) Q(alpha)^T`.
 pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
     let (s, c) = alpha.sin_cos();

@@ -600,7 +600,7 @@ pub(super) mod tests {
     }
 
     /// Circular segment of a circle of radius r cut at distance r - h from its centre.
-    fn segment_area(r: f64, h: f64) -> f64 {
+    pub(in crate::geometry) fn segment_area(r: f64, h: f64) -> f64 {
         let d = r - h;
         r * r * (d / r).acos() - d * (r * r - d * d).sqrt()
     }

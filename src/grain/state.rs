@@ -4,7 +4,9 @@
 //! field of a grain together; the contact kernels read a separate compact array of
 //! [`GrainShape`](crate::geometry::GrainShape)s built once per step.
 
-use crate::geometry::contour::{GrainShape, principal_stretch, rotation, stretch_from};
+use crate::geometry::contour::{
+    GrainShape, QUARTER_TURN, principal_stretch, rotation, stretch_from,
+};
 use glam::{DMat2, DVec2};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -151,7 +153,7 @@ impl Grain {
 
     /// The velocity gradient from `Q(alpha)`, `Q(theta)` and `U`.
     fn velocity_gradient_from(&self, q: DMat2, rot: DMat2, u: DMat2) -> DMat2 {
-        let j = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::new(-1.0, 0.0));
+        let j = QUARTER_TURN;
         let d = DMat2::from_diagonal(DVec2::new(self.eps1, self.eps2));
         let d_rate = DMat2::from_diagonal(DVec2::new(self.eps1_rate, self.eps2_rate));
         // dU/dt = Q (alpha_rate (J D - D J) + dD/dt) Q^T

@@ -28,6 +28,7 @@ use crate::contact::friction::TangentialResponse;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::circle::{disc_disc, disc_wall};
+use crate::geometry::contour::QUARTER_TURN;
 use crate::geometry::{
     ContourTable, GrainShape, Overlap, PairHint, grain_grain_hinted, grain_wall,
 };
@@ -70,7 +71,6 @@ impl Frame {
     #[inline]
     pub fn of_circle(grain: &Grain, density: f64) -> Self {
         let radius = grain.radius * (1.0 + grain.eps1);
-        let rotation_rate = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::new(-1.0, 0.0));
         Frame {
             shape: GrainShape {
                 center: grain.center,
@@ -79,7 +79,7 @@ impl Frame {
                 bounding_radius: radius,
             },
             velocity: grain.velocity,
-            velocity_gradient: rotation_rate * grain.omega,
+            velocity_gradient: QUARTER_TURN * grain.omega,
             mass: grain.mass(density),
             circle: true,
         }
