@@ -26,6 +26,9 @@ pub struct ContourTable {
     vertex_ring: Vec<DVec2>,
     /// Unit outward normal of edge k (from node k to node k+1), at angle `(k + 1/2) dbeta`.
     pub edge_normal: Vec<DVec2>,
+    /// Edge k's ends and normal side by side: the hot loops that walk edges load one record
+    /// (one bounds check) instead of three.
+    edges: Vec<Edge>,
     /// Distance from the centre to every edge of the unit polygon: `cos(dbeta / 2)`.
     pub apothem: f64,
     /// `apothem^2`: points closer to the centre than this are inside for sure.
@@ -56,10 +59,17 @@ impl ContourTable {
             .chain(&vertex)
             .copied()
             .collect();
-        let edge_normal = (0..nodes)
+        let edge_normal: Vec<DVec2> = (0..nodes)
             .map(|k| {
                 let (s, c) = ((k as f64 + 0.5) * dbeta).sin_cos();
                 DVec2::new(c, s)
+            })
+            .collect();
+        let edges = (0..nodes)
+            .map(|k| Edge {
+                start: vertex[k],
+                end: vertex[(k + 1) % nodes],
+                normal: edge_normal[k],
             })
             .collect();
         Self {
@@ -68,6 +78,7 @@ impl ContourTable {
             vertex,
             vertex_ring,
             edge_normal,
+            edges,
             apothem: (0.5 * dbeta).cos(),
             apothem_squared: (0.5 * dbeta).cos().powi(2),
             sin_dbeta: dbeta.sin(),
@@ -128,16 +139,22 @@ impl ContourTable {
     pub fn refine_sector(&self, u: DVec2, mut s: usize) -> usize {
         let n = self.nodes;
         for _ in 0..n {
-            let next = self.next(s);
-            if self.vertex[s].perp_dot(u) < 0.0 {
+            let edge = self.edge(s);
+            if edge.start.perp_dot(u) < 0.0 {
                 s = self.previous(s);
-            } else if self.vertex[next].perp_dot(u) >= 0.0 {
-                s = next;
+            } else if edge.end.perp_dot(u) >= 0.0 {
+                s = self.next(s);
             } else {
                 break;
             }
         }
         s
+    }
+
+    /// Edge k (k in [0, N)).
+    #[inline(always)]
+    pub fn edge(&self, k: usize) -> &Edge {
+        &self.edges[k]
     }
 
     /// Index k + 1 modulo N, for k in [0, N): no division on the hot path.
@@ -162,7 +179,7 @@ impl ContourTable {
     /// Whether `u` lies strictly inside the unit polygon. The inscribed circle (radius =
     /// apothem) and the circumscribed one (radius 1) settle almost every point with one dot
     /// product; only points in the thin ring between them need their sector.
-    #[inline]
+    #[inline(always)]
     pub fn contains(&self, u: DVec2) -> bool {
         let r2 = u.length_squared();
         if r2 < self.apothem_squared {
@@ -170,8 +187,16 @@ impl ContourTable {
         } else if r2 >= 1.0 {
             false
         } else {
-            self.gauge(u, self.sector(u)) < 1.0
+            self.contains_in_ring(u)
         }
+    }
+
+    /// [`contains`](Self::contains) for a point in the ring between the inscribed and the
+    /// circumscribed circles: out of line, so that the two one-comparison cases inline into
+    /// the chain searches.
+    #[inline(never)]
+    fn contains_in_ring(&self, u: DVec2) -> bool {
+        self.gauge(u, self.sector(u)) < 1.0
     }
 
     /// Where the segment from `inside` (gauge < 1) to `outside` (gauge >= 1) leaves the unit
@@ -219,6 +244,14 @@ impl ContourTable {
         }
         best.clamp(0.0, 1.0)
     }
+}
+
+/// One edge of the unit polygon: from node k to node k+1, with its outward normal.
+#[derive(Debug, Clone, Copy)]
+pub struct Edge {
+    pub start: DVec2,
+    pub end: DVec2,
+    pub normal: DVec2,
 }
 
 /// `atan2(y, x)` to within 2e-5 rad (1.15e-5 measured): a minimax polynomial for atan on [0, 1] with octant

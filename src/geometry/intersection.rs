@@ -104,6 +104,33 @@ impl RelativeMap {
     }
 }
 
+/// A test on the nodes of a contour (inside another polygon, or beyond a wall) that the chain
+/// searches probe. A trait rather than a closure so that the polygon test is inlined into
+/// every probe (as a closure it was called out of line, at ten instructions a call).
+trait NodeTest {
+    fn holds(&self, k: isize) -> bool;
+}
+
+impl<F: Fn(isize) -> bool> NodeTest for F {
+    #[inline(always)]
+    fn holds(&self, k: isize) -> bool {
+        self(k)
+    }
+}
+
+/// Node k of `a` lies strictly inside `b`'s polygon.
+struct InsidePolygon<'a> {
+    table: &'a ContourTable,
+    a_in_b: &'a RelativeMap,
+}
+
+impl NodeTest for InsidePolygon<'_> {
+    #[inline(always)]
+    fn holds(&self, k: isize) -> bool {
+        self.table.contains(self.a_in_b.node(self.table, k))
+    }
+}
+
 /// Chain of `a`'s nodes strictly inside `b`'s polygon (`a_in_b` maps a's reference
 /// coordinates into b's).
 ///
@@ -112,6 +139,7 @@ impl RelativeMap {
 /// instead of one per node. Galloping is exact while the run covers at most half the contour (a
 /// probe within N/2 of the seed then always lands in the run or in the outside gap); longer runs
 /// (grains nearly swallowed) are walked node by node.
+#[inline(always)]
 fn chain_inside(
     table: &ContourTable,
     a: &GrainShape,
@@ -119,7 +147,7 @@ fn chain_inside(
     a_in_b: &RelativeMap,
     hint: &mut ChainHint,
 ) -> ChainSearch {
-    let inside = |k: isize| table.contains(a_in_b.node(table, k));
+    let inside = InsidePolygon { table, a_in_b };
 
     let n = table.nodes as isize;
     let half = n / 2;
@@ -161,6 +189,7 @@ fn chain_inside(
 /// edge's sector, which makes it the exit point exactly (the segment crosses the convex
 /// boundary once). A cut outside the sector moves the guess one edge towards it; after a few
 /// misses the exit is searched edge by edge from the inside node's sector.
+#[inline(always)]
 fn crossing_and_edge(
     table: &ContourTable,
     a: &GrainShape,
@@ -174,15 +203,15 @@ fn crossing_and_edge(
     let mut s = guess.unwrap_or_else(|| table.sector(p_in));
     let mut found = None;
     for _ in 0..4 {
-        let normal = table.edge_normal[s];
-        let rate = direction.dot(normal);
+        let edge = table.edge(s);
+        let rate = direction.dot(edge.normal);
         if rate <= 0.0 {
             break;
         }
-        let t = (table.apothem - p_in.dot(normal)) / rate;
+        let t = (table.apothem - p_in.dot(edge.normal)) / rate;
         let q = p_in + direction * t;
-        let after_start = table.vertex[s].perp_dot(q) >= 0.0;
-        let before_end = table.vertex[table.next(s)].perp_dot(q) <= 0.0;
+        let after_start = edge.start.perp_dot(q) >= 0.0;
+        let before_end = edge.end.perp_dot(q) <= 0.0;
         if after_start && before_end {
             if t > 0.0 && t <= 1.0 {
                 found = Some((t, s));
@@ -218,7 +247,7 @@ fn deepest_inside_node(
     a: &GrainShape,
     b: &GrainShape,
     a_in_b: &RelativeMap,
-    inside: &impl Fn(isize) -> bool,
+    inside: &impl NodeTest,
 ) -> Option<isize> {
     let RelativeMap { m, t } = *a_in_b;
     let toward_b = a.inv_map * (b.center - a.center);
@@ -239,14 +268,14 @@ fn deepest_inside_node(
     [0, -1, 1, -2, 2]
         .into_iter()
         .map(|dk| k0 + dk)
-        .find(|&k| inside(k))
+        .find(|&k| inside.holds(k))
 }
 
 /// The chain's ends searched from last step's: exact when the hint's ends, or its middle node,
 /// are still inside (the run through them is the chain), None otherwise.
 #[inline(always)]
 fn hinted_ends(
-    inside: &impl Fn(isize) -> bool,
+    inside: &impl NodeTest,
     hint: &ChainHint,
     n: isize,
 ) -> Option<Option<(isize, isize)>> {
@@ -262,7 +291,7 @@ fn hinted_ends(
     if hi - lo >= half {
         return None;
     }
-    if inside(lo) && inside(hi) {
+    if inside.holds(lo) && inside.holds(hi) {
         // Both of last step's ends are still inside, so the chain runs through lo..=hi (or it
         // covers more than half the contour, which the walk settles): extend it outwards.
         let room = half - (hi - lo);
@@ -274,7 +303,7 @@ fn hinted_ends(
         });
     }
     let seed = (lo + hi) / 2;
-    if !inside(seed) {
+    if !inside.holds(seed) {
         return None;
     }
     let forward = find_end(inside, seed, 1, half, Some(hi - seed));
@@ -291,22 +320,21 @@ fn hinted_ends(
 /// gallops from the seed.
 #[inline(always)]
 fn find_end(
-    inside: &impl Fn(isize) -> bool,
+    inside: &impl NodeTest,
     seed: isize,
     dir: isize,
     limit: isize,
     guess: Option<isize>,
 ) -> Option<isize> {
-    let at = |d: isize| inside(seed + dir * d);
     let (mut last_in, mut first_out);
     match guess {
-        Some(g) if g > 0 && g < limit && !at(g) => {
+        Some(g) if g > 0 && g < limit && !inside.holds(seed + dir * g) => {
             // The end lies before the guess: gallop back towards the seed.
             first_out = g;
             let mut step = 1;
             loop {
                 let probe = (first_out - step).max(0);
-                if probe == 0 || at(probe) {
+                if probe == 0 || inside.holds(seed + dir * probe) {
                     last_in = probe;
                     break;
                 }
@@ -322,7 +350,7 @@ fn find_end(
             let mut step = 1;
             loop {
                 let probe = (last_in + step).min(limit);
-                if at(probe) {
+                if inside.holds(seed + dir * probe) {
                     if probe == limit {
                         return None;
                     }
@@ -337,7 +365,7 @@ fn find_end(
     }
     while first_out - last_in > 1 {
         let mid = (last_in + first_out) / 2;
-        if at(mid) {
+        if inside.holds(seed + dir * mid) {
             last_in = mid;
         } else {
             first_out = mid;
@@ -347,16 +375,16 @@ fn find_end(
 }
 
 /// Node-by-node walk from the seed; None when every node is inside.
-fn walk(inside: &impl Fn(isize) -> bool, seed: isize, nodes: isize) -> Option<(isize, isize)> {
+fn walk(inside: &impl NodeTest, seed: isize, nodes: isize) -> Option<(isize, isize)> {
     let mut hi = seed;
-    while inside(hi + 1) {
+    while inside.holds(hi + 1) {
         hi += 1;
         if hi - seed >= nodes {
             return None;
         }
     }
     let mut lo = seed;
-    while inside(lo - 1) {
+    while inside.holds(lo - 1) {
         lo -= 1;
     }
     if hi - lo + 1 >= nodes {
