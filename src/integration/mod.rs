@@ -404,30 +404,44 @@ impl World {
         self.wall_history
             .resize(self.grains.len(), [0.0; MAX_WALLS]);
         let density = self.params.material.density;
-        self.grains
-            .par_iter()
-            .zip(self.levels.par_iter())
+        let frame_of = |g: &Grain, level: &GrainLevel| {
+            if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
+                return Frame::of_circle(g, density);
+            }
+            let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
+            Frame {
+                shape,
+                velocity: g.velocity,
+                velocity_gradient,
+                mass: g.mass(density),
+                circle: false,
+            }
+        };
+        let n = self.grains.len();
+        if self.frames.len() != n {
+            self.frames = self
+                .grains
+                .iter()
+                .zip(&self.levels)
+                .map(|(g, l)| frame_of(g, l))
+                .collect();
+        }
+        self.centers.resize(n, DVec2::ZERO);
+        self.reach.resize(n, 0.0);
+        // One parallel pass writes the frames and, beside them, the compact centres and reaches
+        // of the broad phase: they were two serial passes over the frames, which the second
+        // thread could not share.
+        self.frames
+            .par_iter_mut()
+            .zip(self.centers.par_iter_mut())
+            .zip(self.reach.par_iter_mut())
+            .zip(self.grains.par_iter().zip(self.levels.par_iter()))
             .with_min_len(GRAIN_CHUNK)
-            .map(|(g, level)| {
-                if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
-                    return Frame::of_circle(g, density);
-                }
-                let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
-                Frame {
-                    shape,
-                    velocity: g.velocity,
-                    velocity_gradient,
-                    mass: g.mass(density),
-                    circle: false,
-                }
-            })
-            .collect_into_vec(&mut self.frames);
-        self.centers.clear();
-        self.centers
-            .extend(self.frames.iter().map(|f| f.shape.center));
-        self.reach.clear();
-        self.reach
-            .extend(self.frames.iter().map(|f| f.shape.bounding_radius));
+            .for_each(|(((frame, center), reach), (g, level))| {
+                *frame = frame_of(g, level);
+                *center = frame.shape.center;
+                *reach = frame.shape.bounding_radius;
+            });
         let (centers, reach) = (&self.centers, &self.reach);
         let cell = self.cell();
         if let Some(cell) = &cell {
