@@ -530,7 +530,8 @@ impl World {
                     }
                     let mut hint = slot.hint;
                     let history = slot.tangential_history;
-                    *slot = PairContact::default();
+                    // Each outcome writes the slot once: an open or failed pair keeps only its
+                    // search hint (its spring resets), a contact the whole record.
                     let overlap = if fi.circle && fj.circle {
                         disc_disc(
                             fi.shape.center,
@@ -541,10 +542,18 @@ impl World {
                     } else {
                         grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
                     };
-                    slot.hint = hint;
                     match overlap {
-                        Overlap::Separate => {}
+                        Overlap::Separate => {
+                            *slot = PairContact {
+                                hint,
+                                ..Default::default()
+                            }
+                        }
                         Overlap::Swallowed => {
+                            *slot = PairContact {
+                                hint,
+                                ..Default::default()
+                            };
                             failure.get_or_insert(Instability::Swallowed {
                                 step,
                                 grain: i as usize,
@@ -553,6 +562,10 @@ impl World {
                         }
                         Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
                             Err(exit) => {
+                                *slot = PairContact {
+                                    hint,
+                                    ..Default::default()
+                                };
                                 failure.get_or_insert(Instability::ContactDomain {
                                     step,
                                     grain: i as usize,
