@@ -405,6 +405,22 @@ mod tests {
     }
 
     #[test]
+    fn edges_join_consecutive_nodes_with_their_outward_normal() {
+        // Expectation: edge k runs from node k to node k+1 (node 0 after the last), its normal
+        // is perpendicular to it, and the edge lies at the apothem along that normal.
+        for nodes in [8, 13, 360] {
+            let table = ContourTable::with_nodes(nodes);
+            for k in 0..nodes {
+                let edge = table.edge(k);
+                assert_eq!(edge.start, table.vertex[k]);
+                assert_eq!(edge.end, table.vertex[table.next(k)]);
+                assert!((edge.end - edge.start).dot(edge.normal).abs() < 1e-12);
+                assert!((edge.start.dot(edge.normal) - table.apothem).abs() < 1e-12);
+                assert!((edge.end.dot(edge.normal) - table.apothem).abs() < 1e-12);
+            }
+        }
+    }
+    #[test]
     fn fast_atan2_is_within_2e_5_of_atan2_everywhere() {
         for k in 0..100_000 {
             let phi = -3.2 + 6.4 * k as f64 / 100_000.0;
