@@ -106,7 +106,7 @@ impl RelativeMap {
 
 /// A test on the nodes of a contour (inside another polygon, or beyond a wall) that the chain
 /// searches probe. A trait rather than a closure so that the polygon test is inlined into
-/// every probe (as a closure it was called out of line, at ten instructions a call).
+/// every probe (as a closure LLVM called it out of line, once per probe).
 trait NodeTest {
     fn holds(&self, k: isize) -> bool;
 }
