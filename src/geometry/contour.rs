@@ -280,7 +280,7 @@ pub fn fast_atan2(y: f64, x: f64) -> f64 {
 }
 
 /// The current shape of one grain, as needed by the contact kernels.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct GrainShape {
     /// Centre of mass.
     pub center: DVec2,

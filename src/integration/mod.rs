@@ -47,7 +47,7 @@ pub const PAIR_CHUNK: usize = 512;
 pub const MAX_WALLS: usize = 8;
 
 /// What a grain's neighbours need from it during one step.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct Frame {
     pub shape: GrainShape,
     pub velocity: DVec2,
@@ -418,14 +418,7 @@ impl World {
             }
         };
         let n = self.grains.len();
-        if self.frames.len() != n {
-            self.frames = self
-                .grains
-                .iter()
-                .zip(&self.levels)
-                .map(|(g, l)| frame_of(g, l))
-                .collect();
-        }
+        self.frames.resize(n, Frame::default());
         self.centers.resize(n, DVec2::ZERO);
         self.reach.resize(n, 0.0);
         // One parallel pass writes the frames and, beside them, the compact centres and reaches
@@ -530,8 +523,6 @@ impl World {
                     }
                     let mut hint = slot.hint;
                     let history = slot.tangential_history;
-                    // Each outcome writes the slot once: an open or failed pair keeps only its
-                    // search hint (its spring resets), a contact the whole record.
                     let overlap = if fi.circle && fj.circle {
                         disc_disc(
                             fi.shape.center,
@@ -542,30 +533,24 @@ impl World {
                     } else {
                         grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
                     };
-                    match overlap {
-                        Overlap::Separate => {
-                            *slot = PairContact {
-                                hint,
-                                ..Default::default()
-                            }
-                        }
+                    // Each outcome writes the slot once: an open or failed pair keeps only its
+                    // search hint (its spring resets), a contact the whole record.
+                    let open = PairContact {
+                        hint,
+                        ..Default::default()
+                    };
+                    *slot = match overlap {
+                        Overlap::Separate => open,
                         Overlap::Swallowed => {
-                            *slot = PairContact {
-                                hint,
-                                ..Default::default()
-                            };
                             failure.get_or_insert(Instability::Swallowed {
                                 step,
                                 grain: i as usize,
                                 other: Some(j as usize),
                             });
+                            open
                         }
                         Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
                             Err(exit) => {
-                                *slot = PairContact {
-                                    hint,
-                                    ..Default::default()
-                                };
                                 failure.get_or_insert(Instability::ContactDomain {
                                     step,
                                     grain: i as usize,
@@ -573,6 +558,7 @@ impl World {
                                     length: exit.length,
                                     normal_gap: exit.normal_gap,
                                 });
+                                open
                             }
                             Ok(response) => {
                                 let velocity_j =
@@ -605,7 +591,7 @@ impl World {
                                 };
                                 dissipation += tangential.dissipated;
                                 sliding += tangential.sliding as u64;
-                                *slot = PairContact {
+                                PairContact {
                                     active: true,
                                     normal: c.normal,
                                     force,
@@ -618,15 +604,15 @@ impl World {
                                     tangential_force: tangential.force,
                                     tangential_history: tangential.history,
                                     hint,
-                                };
-                                if periodic.is_some() {
-                                    let share = symmetric_dyad(slot.force_on_first(), branch);
-                                    for (sum, x) in moment.iter_mut().zip(share) {
-                                        *sum += x;
-                                    }
                                 }
                             }
                         },
+                    };
+                    if slot.active && periodic.is_some() {
+                        let share = symmetric_dyad(slot.force_on_first(), branch);
+                        for (sum, x) in moment.iter_mut().zip(share) {
+                            *sum += x;
+                        }
                     }
                 }
                 PairSums {
