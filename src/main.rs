@@ -483,6 +483,7 @@ fn run(cli: Cli) -> Result<()> {
                 result.seconds
             );
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
+            println!("time by pass: {}", result.phases);
         }
         Command::Calibrate {
             assembly,
@@ -729,6 +730,9 @@ fn report(summary: &sdem::run::RunSummary, options: &RunOptions, out_dir: &Path)
         summary.wall_seconds,
         summary.steps as f64 * summary.grains as f64 / summary.wall_seconds.max(1e-9)
     );
+    if let Some(phases) = &summary.phase_seconds {
+        eprintln!("time by pass: {phases}");
+    }
     if let Some(j) = summary.jamming {
         eprintln!(
             "jamming: step {}, phi_0 = {:.4}, z_0 = {:.3}, z_nr_0 = {:.3}",

@@ -38,6 +38,7 @@ use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// Grains per chunk of the parallel passes: fixed, so that every reduction is the same sum in
 /// the same order for any number of threads.
@@ -177,6 +178,43 @@ pub struct StepTotals {
     pub sliding_contacts: u64,
 }
 
+/// Wall-clock seconds spent in each pass of the step since the world was made, as LAMMPS
+/// prints its "Pair / Neigh / Other" breakdown: where a run's time goes. A diagnostic only;
+/// nothing in the physics reads it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// The frames pass: shapes and velocity fields of the grains.
+    pub frames: f64,
+    /// The neighbour list: the rebuild test every step, and the rebuilds.
+    pub neighbors: f64,
+    /// The pair pass: contact geometry and forces of the candidate pairs.
+    pub pairs: f64,
+    /// The grain pass: sums of each grain's contacts, its wall contacts, stresses and update;
+    /// and the walls' or the cell's motion.
+    pub grains: f64,
+}
+
+impl PhaseTimes {
+    pub fn total(&self) -> f64 {
+        self.frames + self.neighbors + self.pairs + self.grains
+    }
+}
+
+/// Each pass's share of the steps' time: "frames 6.6%, neighbour list 9.0%, ...".
+impl std::fmt::Display for PhaseTimes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let share = |t: f64| 100.0 * t / self.total().max(f64::MIN_POSITIVE);
+        write!(
+            f,
+            "frames {:.1}%, neighbour list {:.1}%, pairs {:.1}%, grains {:.1}%",
+            share(self.frames),
+            share(self.neighbors),
+            share(self.pairs),
+            share(self.grains)
+        )
+    }
+}
+
 /// Sums over the grain–grain contacts of one step.
 #[derive(Debug, Clone, Copy, Default)]
 struct PairSums {
@@ -234,6 +272,10 @@ pub struct World {
     pub neighbors: NeighborList,
     pub frames: Vec<Frame>,
     pub pair_contacts: Vec<PairContact>,
+    /// `pair_contacts[p].active` of each pair, packed: the grain pass tests it for each of its
+    /// grains' candidate pairs, and most candidates of a loose packing are open, whose
+    /// 120-byte records it then need not load.
+    pair_active: Vec<bool>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
     /// Each grain's model level (all at `params.level` unless the level is adaptive).
@@ -248,6 +290,8 @@ pub struct World {
     /// The tangential spring force of each grain's contact with each wall (SPEC §13; zero when
     /// the contact is open), kept for every grain so that the grain pass can own its row.
     wall_history: Vec<[f64; MAX_WALLS]>,
+    /// Where the steps' wall-clock time went (a diagnostic).
+    pub phase_times: PhaseTimes,
 }
 
 impl World {
@@ -274,6 +318,7 @@ impl World {
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
             pair_contacts: Vec::new(),
+            pair_active: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
             levels: vec![GrainLevel::new(start); n],
@@ -282,6 +327,7 @@ impl World {
             wraps: Vec::new(),
             friction_work: 0.0,
             wall_history: vec![[0.0; MAX_WALLS]; n],
+            phase_times: PhaseTimes::default(),
         };
         world.count_levels();
         world
@@ -400,6 +446,7 @@ impl World {
 
     /// Recomputes shapes, velocity fields and the neighbour list for the current state.
     fn prepare(&mut self) -> Result<(), Instability> {
+        let start = Instant::now();
         // A grain added after construction gets an empty row of wall history.
         self.wall_history
             .resize(self.grains.len(), [0.0; MAX_WALLS]);
@@ -435,6 +482,8 @@ impl World {
                 *center = frame.shape.center;
                 *reach = frame.shape.bounding_radius;
             });
+        let frames_done = Instant::now();
+        self.phase_times.frames += (frames_done - start).as_secs_f64();
         let (centers, reach) = (&self.centers, &self.reach);
         let cell = self.cell();
         if let Some(cell) = &cell {
@@ -481,6 +530,7 @@ impl World {
         }
         self.pair_contacts
             .resize(self.neighbors.pairs.len(), PairContact::default());
+        self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
     }
 
@@ -497,17 +547,19 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
+        self.pair_active.resize(self.pair_contacts.len(), false);
         let chunk_results: Vec<PairSums> = self
             .pair_contacts
             .par_chunks_mut(PAIR_CHUNK)
+            .zip(self.pair_active.par_chunks_mut(PAIR_CHUNK))
             .enumerate()
-            .map(|(chunk, out)| {
+            .map(|(chunk, (out, active_flags))| {
                 let mut capped = 0;
                 let mut moment = [0.0; 3];
                 let mut failure = None;
                 let mut dissipation = 0.0;
                 let mut sliding = 0;
-                for (k, slot) in out.iter_mut().enumerate() {
+                for (k, (slot, active)) in out.iter_mut().zip(active_flags).enumerate() {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
@@ -608,6 +660,7 @@ impl World {
                             }
                         },
                     };
+                    *active = slot.active;
                     if slot.active && periodic.is_some() {
                         let share = symmetric_dyad(slot.force_on_first(), branch);
                         for (sum, x) in moment.iter_mut().zip(share) {
@@ -642,7 +695,10 @@ impl World {
     /// Advances the world by one time step.
     pub fn step(&mut self) -> Result<&StepTotals, Instability> {
         self.prepare()?;
+        let pairs_start = Instant::now();
         let pair_sums = self.compute_pair_contacts()?;
+        let grains_start = Instant::now();
+        self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
 
         let params = &self.params;
         let table = &self.table;
@@ -844,6 +900,7 @@ impl World {
         self.totals = totals;
         // The next step's time step, from the levels the grains chose (a fixed-order sum).
         self.apply_adaptive_dt();
+        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
         Ok(&self.totals)
     }
 

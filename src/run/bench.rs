@@ -10,7 +10,7 @@ use crate::boundary::walls::box_walls;
 use crate::contact::friction::FrictionSettings;
 use crate::grain::{Grain, GrainLevel, Material, ModelLevel};
 use crate::integration::parameters::{Friction, critical_time_step, frictional_critical_time_step};
-use crate::integration::{Instability, Parameters, World};
+use crate::integration::{Instability, Parameters, PhaseTimes, World};
 use crate::sample::{RadiusDistribution, unit_random};
 use glam::DVec2;
 use rand::SeedableRng;
@@ -28,6 +28,8 @@ pub struct BenchResult {
     pub phi: f64,
     /// Neighbour-list builds during the timed steps.
     pub neighbor_builds: u64,
+    /// Seconds of the timed steps spent in each pass of the step.
+    pub phases: PhaseTimes,
 }
 
 impl BenchResult {
@@ -108,6 +110,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         world.step()?;
     }
     let builds_before = world.neighbors.builds;
+    let phases_before = world.phase_times;
     let start = Instant::now();
     for _ in 0..steps {
         world.step()?;
@@ -121,5 +124,42 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         contacts: world.totals.contacts,
         phi: world.totals.grain_area / (width * height),
         neighbor_builds: world.neighbors.builds - builds_before,
+        phases: PhaseTimes {
+            frames: world.phase_times.frames - phases_before.frames,
+            neighbors: world.phase_times.neighbors - phases_before.neighbors,
+            pairs: world.phase_times.pairs - phases_before.pairs,
+            grains: world.phase_times.grains - phases_before.grains,
+        },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_passes_account_for_the_timed_steps_and_no_more() {
+        // Expectation: each pass is timed inside the step, so the four passes of the timed steps
+        // are positive and sum to no more than the time the steps took (the warm-up excluded).
+        let mut world = dense_packing(200, 1.0);
+        let result = run_bench(&mut world, 3, 10).unwrap();
+        let p = result.phases;
+        for (name, seconds) in [
+            ("frames", p.frames),
+            ("neighbours", p.neighbors),
+            ("pairs", p.pairs),
+            ("grains", p.grains),
+        ] {
+            assert!(seconds > 0.0, "{name}: {seconds}");
+        }
+        assert!(
+            p.total() <= result.seconds,
+            "{p:?} against {}",
+            result.seconds
+        );
+        assert!(
+            world.phase_times.total() > p.total(),
+            "the warm-up steps count in the world's own"
+        );
+    }
 }

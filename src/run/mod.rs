@@ -23,7 +23,7 @@ pub use steps::LoopState;
 use crate::boundary::loading::{LoadState, LoadingProgram};
 use crate::boundary::periodic::PeriodicBoundary;
 use crate::grain::Grain;
-use crate::integration::{Instability, StepTotals, World};
+use crate::integration::{Instability, PhaseTimes, StepTotals, World};
 use crate::output::MacroWriter;
 use crate::output::Measures;
 use crate::output::mcap::{ContinueFrom, Continued, McapSettings, TrajectoryWriter, WriteError};
@@ -136,6 +136,8 @@ pub struct RunSummary {
     /// Largest inertial number seen once p_c > 1e-4 E.
     pub max_loaded_inertial_number: f64,
     pub neighbor_builds: u64,
+    /// SDEM only: the wall-clock seconds this process's steps spent in each pass of the step.
+    pub phase_seconds: Option<PhaseTimes>,
     /// For nu = 0.5: RMS relative error of p_c(phi) against eq. 69 with the run's own phi_0 and
     /// Z_0 (= z_nr at jamming), over phi in [phi_0 + 0.01, final phi], and the number of rows.
     pub eq69_rms_error: Option<(f64, usize)>,
@@ -565,6 +567,17 @@ pub(crate) fn write_summary(
         s.max_loaded_inertial_number
     )?;
     writeln!(f, "neighbor_builds = {}", s.neighbor_builds)?;
+    if let Some(p) = &s.phase_seconds {
+        // As LAMMPS's breakdown: which pass of the step a run's time went to.
+        for (name, seconds) in [
+            ("frames", p.frames),
+            ("neighbor_list", p.neighbors),
+            ("pairs", p.pairs),
+            ("grains", p.grains),
+        ] {
+            writeln!(f, "pass_seconds_{name} = {seconds:.3}")?;
+        }
+    }
     if s.mcap_seconds > 0.0 {
         writeln!(f, "mcap_write_seconds = {:.3}", s.mcap_seconds)?;
     }

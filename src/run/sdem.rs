@@ -254,6 +254,7 @@ impl Simulation for Sdem {
     fn statistics(&self) -> SolverStatistics {
         SolverStatistics {
             neighbor_builds: self.world.neighbors.builds,
+            phase_seconds: Some(self.world.phase_times),
             adaptive: self.adaptive,
         }
     }

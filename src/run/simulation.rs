@@ -3,6 +3,7 @@
 use super::{AdaptiveStats, LoopState, RunError};
 use crate::boundary::loading::{LoadState, LoadingProgram};
 use crate::boundary::walls::Wall;
+use crate::integration::PhaseTimes;
 use crate::output::Measures;
 use crate::output::frame::Frame;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
@@ -229,6 +230,8 @@ pub struct RunRecord<'a> {
 pub struct SolverStatistics {
     /// Neighbour-list builds (0 for a solver without one).
     pub neighbor_builds: u64,
+    /// SDEM only: where this process's steps spent their wall-clock time.
+    pub phase_seconds: Option<PhaseTimes>,
     /// Adaptive model level only: how the steps were spent.
     pub adaptive: Option<AdaptiveStats>,
 }

@@ -507,6 +507,7 @@ impl<'a> Run<'a> {
             last: std::mem::take(&mut self.last_row),
             max_loaded_inertial_number: state.max_loaded_inertial_number,
             neighbor_builds: statistics.neighbor_builds,
+            phase_seconds: statistics.phase_seconds,
             mcap_seconds: self.mcap_seconds,
             adaptive: statistics.adaptive,
             checkpoints_written: self.checkpoints_written,
