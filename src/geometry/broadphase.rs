@@ -19,10 +19,13 @@ pub struct NeighborList {
     pub skin: f64,
     /// Candidate pairs (i, j), i < j, sorted.
     pub pairs: Vec<[u32; 2]>,
-    /// For grain g, `grain_pairs[grain_offsets[g]..grain_offsets[g + 1]]` lists the indices of
-    /// the pairs that contain g, in increasing order.
-    pub grain_offsets: Vec<u32>,
-    pub grain_pairs: Vec<u32>,
+    /// For grain g, `grain_pairs[grain_offsets[g]..grain_offsets[g + 1]]` lists g's ends of
+    /// the pairs that contain it, in increasing pair order (see [`NeighborList::pairs_of`]).
+    grain_offsets: Vec<u32>,
+    /// Each entry `2 p + s`: the pair index p, and s = 1 where the grain is the pair's second.
+    /// The grain pass reads which end it holds from here instead of from `pairs[p]`, a load from
+    /// a scattered address per contact.
+    grain_pairs: Vec<u32>,
     /// Periodic cell only: for pair `[i, j]`, the image `n` of j that meets i (its centre is
     /// `x_j + H n`). Empty without a cell.
     pub images: Vec<[i64; 2]>,
@@ -326,6 +329,11 @@ impl NeighborList {
 
     /// Fills `grain_offsets` and `grain_pairs` from `pairs`.
     fn index_pairs_by_grain(&mut self, n: usize) {
+        assert!(
+            self.pairs.len() < 1 << 31,
+            "{} candidate pairs: the index of grain ends holds at most 2^31",
+            self.pairs.len()
+        );
         for [i, j] in &self.pairs {
             self.grain_offsets[*i as usize + 1] += 1;
             self.grain_offsets[*j as usize + 1] += 1;
@@ -336,8 +344,8 @@ impl NeighborList {
         self.grain_pairs.resize(self.grain_offsets[n] as usize, 0);
         let mut fill: Vec<u32> = self.grain_offsets[..n].to_vec();
         for (p, [i, j]) in self.pairs.iter().enumerate() {
-            for g in [*i as usize, *j as usize] {
-                self.grain_pairs[fill[g] as usize] = p as u32;
+            for (side, g) in [*i as usize, *j as usize].into_iter().enumerate() {
+                self.grain_pairs[fill[g] as usize] = 2 * p as u32 + side as u32;
                 fill[g] += 1;
             }
         }
@@ -358,11 +366,25 @@ impl NeighborList {
             });
     }
 
-    /// Indices of the pairs that contain grain g.
+    /// Grain g's ends of the pairs that contain it, in increasing pair order.
     #[inline]
-    pub fn pairs_of(&self, g: usize) -> &[u32] {
-        &self.grain_pairs[self.grain_offsets[g] as usize..self.grain_offsets[g + 1] as usize]
+    pub fn pairs_of(&self, g: usize) -> impl ExactSizeIterator<Item = PairEnd> + '_ {
+        self.grain_pairs[self.grain_offsets[g] as usize..self.grain_offsets[g + 1] as usize]
+            .iter()
+            .map(|&entry| PairEnd {
+                pair: (entry >> 1) as usize,
+                second: entry & 1 == 1,
+            })
     }
+}
+
+/// One grain's end of a candidate pair `[i, j]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PairEnd {
+    /// The pair's index in [`NeighborList::pairs`].
+    pub pair: usize,
+    /// The grain is the pair's second, j.
+    pub second: bool,
 }
 
 /// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
@@ -410,8 +432,8 @@ mod tests {
         }
         assert_eq!(list.pairs, brute);
         for g in 0..500 {
-            for &p in list.pairs_of(g) {
-                assert!(list.pairs[p as usize].contains(&(g as u32)));
+            for end in list.pairs_of(g) {
+                assert_eq!(list.pairs[end.pair][end.second as usize], g as u32);
             }
         }
         assert!(!list.needs_rebuild(&centers, &reach));

@@ -505,28 +505,40 @@ impl World {
         if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
             // Only a pair's search hint and tangential spring carry over: keeping them alone,
-            // and freeing the old contact records before the new ones exist, lowers the memory
-            // peak of a rebuild (it was a third of a world's memory at 10^6 grains).
-            let carried: Vec<(PairHint, f64)> = std::mem::take(&mut self.pair_contacts)
-                .iter()
+            // and reusing the records' buffer for the new list, holds the memory peak of a
+            // rebuild down (a second set of records was a third of a world's memory at 10^6
+            // grains).
+            let carried: Vec<(PairHint, f64)> = self
+                .pair_contacts
+                .par_iter()
                 .map(|c| (c.hint, c.tangential_history))
                 .collect();
             match &cell {
                 Some(cell) => self.neighbors.build_periodic(centers, reach, cell),
                 None => self.neighbors.build(centers, reach),
             }
-            // Pair indices change with the list: carry each surviving pair's search hint over
-            // (both lists are sorted by (i, j)).
-            self.pair_contacts = vec![PairContact::default(); self.neighbors.pairs.len()];
-            let mut k = 0;
-            for (slot, pair) in self.pair_contacts.iter_mut().zip(&self.neighbors.pairs) {
-                while k < old_pairs.len() && old_pairs[k] < *pair {
-                    k += 1;
-                }
-                if k < old_pairs.len() && old_pairs[k] == *pair {
-                    (slot.hint, slot.tangential_history) = carried[k];
-                }
-            }
+            // Pair indices change with the list: carry each surviving pair's search hint over.
+            // Both lists are sorted by (i, j), so each chunk of the new list merges with the
+            // old one from where its first pair would be: a parallel pass, where a serial
+            // merge was the largest part of a rebuild that a second thread could not share.
+            let pairs = &self.neighbors.pairs;
+            self.pair_contacts
+                .resize(pairs.len(), PairContact::default());
+            self.pair_contacts
+                .par_chunks_mut(PAIR_CHUNK)
+                .zip(pairs.par_chunks(PAIR_CHUNK))
+                .for_each(|(slots, chunk_pairs)| {
+                    let mut k = old_pairs.partition_point(|old| *old < chunk_pairs[0]);
+                    for (slot, pair) in slots.iter_mut().zip(chunk_pairs) {
+                        while k < old_pairs.len() && old_pairs[k] < *pair {
+                            k += 1;
+                        }
+                        *slot = PairContact::default();
+                        if k < old_pairs.len() && old_pairs[k] == *pair {
+                            (slot.hint, slot.tangential_history) = carried[k];
+                        }
+                    }
+                });
         }
         self.pair_contacts
             .resize(self.neighbors.pairs.len(), PairContact::default());
@@ -563,14 +575,14 @@ impl World {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
-                    // The second grain, or its image that meets the first.
-                    let mut shape_j = fj.shape;
+                    // The centre of the second grain, or of its image that meets the first.
+                    let mut center_j = fj.shape.center;
                     // In a periodic cell: the branch vector, and the affine field's `L d`.
                     let mut branch = DVec2::ZERO;
                     let mut affine_rate = DVec2::ZERO;
                     if let Some((cell, velocity_gradient)) = &periodic {
-                        shape_j.center += cell.image_shift(images[p]);
-                        branch = shape_j.center - fi.shape.center;
+                        center_j += cell.image_shift(images[p]);
+                        branch = center_j - fi.shape.center;
                         affine_rate = *velocity_gradient * branch;
                     }
                     let mut hint = slot.hint;
@@ -579,10 +591,14 @@ impl World {
                         disc_disc(
                             fi.shape.center,
                             fi.shape.bounding_radius,
-                            shape_j.center,
-                            shape_j.bounding_radius,
+                            center_j,
+                            fj.shape.bounding_radius,
                         )
                     } else {
+                        let shape_j = GrainShape {
+                            center: center_j,
+                            ..fj.shape
+                        };
                         grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
                     };
                     // Each outcome writes the slot once: an open or failed pair keeps only its
@@ -614,7 +630,7 @@ impl World {
                             }
                             Ok(response) => {
                                 let velocity_j =
-                                    fj.velocity + fj.velocity_gradient * (c.point - shape_j.center);
+                                    fj.velocity + fj.velocity_gradient * (c.point - center_j);
                                 let relative_velocity =
                                     velocity_j - fi.velocity_at(c.point) + affine_rate;
                                 let gap_rate = relative_velocity.dot(c.normal);
@@ -728,18 +744,17 @@ impl World {
                     let g = chunk * GRAIN_CHUNK + k;
                     let frame = &frames[g];
                     let mut load = ContactLoad::default();
-                    for &p in neighbors.pairs_of(g) {
-                        let c = &pair_contacts[p as usize];
+                    for end in neighbors.pairs_of(g) {
+                        let c = &pair_contacts[end.pair];
                         if !c.active {
                             continue;
                         }
-                        let first = neighbors.pairs[p as usize][0] as usize == g;
-                        let (force, cap, center) = if first {
+                        let (force, cap, center) = if !end.second {
                             (c.force_on_first(), c.cap_area_first, frame.shape.center)
                         } else {
                             // The contact point lies at the image of this grain that met the first.
                             let image = match &cell {
-                                Some(cell) => cell.image_shift(neighbors.images[p as usize]),
+                                Some(cell) => cell.image_shift(neighbors.images[end.pair]),
                                 None => DVec2::ZERO,
                             };
                             (
@@ -1183,7 +1198,8 @@ fn check_grain(
         grain.alpha,
         grain.alpha_rate,
     ];
-    if values.iter().any(|v| !v.is_finite()) {
+    // Every value tested, without a branch per value: the common case is all finite.
+    if !values.iter().fold(true, |finite, v| finite & v.is_finite()) {
         return Err(Instability::NonFinite { step, grain: index });
     }
     if grain.eps1 <= -1.0 || grain.eps2 <= -1.0 {
