@@ -272,10 +272,6 @@ pub struct World {
     pub neighbors: NeighborList,
     pub frames: Vec<Frame>,
     pub pair_contacts: Vec<PairContact>,
-    /// `pair_contacts[p].active` of each pair, packed: the grain pass tests it for each of its
-    /// grains' candidate pairs, and most candidates of a loose packing are open, whose
-    /// 120-byte records it then need not load.
-    pair_active: Vec<bool>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
     /// Each grain's model level (all at `params.level` unless the level is adaptive).
@@ -318,7 +314,6 @@ impl World {
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
             pair_contacts: Vec::new(),
-            pair_active: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
             levels: vec![GrainLevel::new(start); n],
@@ -559,19 +554,17 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
-        self.pair_active.resize(self.pair_contacts.len(), false);
         let chunk_results: Vec<PairSums> = self
             .pair_contacts
             .par_chunks_mut(PAIR_CHUNK)
-            .zip(self.pair_active.par_chunks_mut(PAIR_CHUNK))
             .enumerate()
-            .map(|(chunk, (out, active_flags))| {
+            .map(|(chunk, out)| {
                 let mut capped = 0;
                 let mut moment = [0.0; 3];
                 let mut failure = None;
                 let mut dissipation = 0.0;
                 let mut sliding = 0;
-                for (k, (slot, active)) in out.iter_mut().zip(active_flags).enumerate() {
+                for (k, slot) in out.iter_mut().enumerate() {
                     let p = chunk * PAIR_CHUNK + k;
                     let [i, j] = pairs[p];
                     let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
@@ -676,7 +669,6 @@ impl World {
                             }
                         },
                     };
-                    *active = slot.active;
                     if slot.active && periodic.is_some() {
                         let share = symmetric_dyad(slot.force_on_first(), branch);
                         for (sum, x) in moment.iter_mut().zip(share) {
