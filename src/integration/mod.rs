@@ -200,18 +200,25 @@ impl PhaseTimes {
     }
 }
 
-/// Each pass's share of the steps' time: "frames 6.6%, neighbour list 9.0%, ...".
+/// Each pass's seconds and share of the steps' time: "frames 0.31 s (6.6%), ...".
 impl std::fmt::Display for PhaseTimes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let share = |t: f64| 100.0 * t / self.total().max(f64::MIN_POSITIVE);
-        write!(
-            f,
-            "frames {:.1}%, neighbour list {:.1}%, pairs {:.1}%, grains {:.1}%",
-            share(self.frames),
-            share(self.neighbors),
-            share(self.pairs),
-            share(self.grains)
-        )
+        let passes = [
+            ("frames", self.frames),
+            ("neighbour list", self.neighbors),
+            ("pairs", self.pairs),
+            ("grains", self.grains),
+        ];
+        for (k, (name, seconds)) in passes.into_iter().enumerate() {
+            let separator = if k == 0 { "" } else { ", " };
+            write!(
+                f,
+                "{separator}{name} {seconds:.3} s ({:.1}%)",
+                share(seconds)
+            )?;
+        }
+        Ok(())
     }
 }
 
