@@ -127,3 +127,41 @@ fn step_dense_packing_rigid(bencher: divan::Bencher, grains: usize) {
             world.step().unwrap();
         });
 }
+
+/// The whole step on the dense packing spread apart by 15% (φ about 0.68), every grain a rigid
+/// disc at rest: no contacts, so what is timed is the per-grain work of a loose gas (frames,
+/// the neighbour list's rebuild test, open candidate pairs, the grain pass), which is where
+/// the gas half of `scenarios/isotropic_100k.ron` spends its time.
+#[divan::bench(args = [1000, 10000], sample_count = 20)]
+fn step_loose_rigid(bencher: divan::Bencher, grains: usize) {
+    let mut world = sdem::run::bench::dense_packing(grains, 1.0);
+    sdem::run::bench::with_model(&mut world, sdem::grain::ModelLevel::Rigid);
+    for g in &mut world.grains {
+        g.center *= 1.15;
+    }
+    for wall in &mut world.walls {
+        wall.point *= 1.15;
+    }
+    world.step().unwrap();
+    assert_eq!(world.totals.contacts, 0, "a loose packing without contacts");
+    bencher
+        .counter(divan::counter::ItemsCount::new(world.grains.len()))
+        .bench_local(|| {
+            world.step().unwrap();
+        });
+}
+
+/// A neighbour-list build on the dense packing's centres (skin 0.2 of the mean radius, as
+/// the step uses): the binning, the pair search and the per-grain index.
+#[divan::bench(args = [10000, 100000], sample_count = 10)]
+fn neighbor_list_build(bencher: divan::Bencher, grains: usize) {
+    let world = sdem::run::bench::dense_packing(grains, 1.0);
+    let centers: Vec<DVec2> = world.grains.iter().map(|g| g.center).collect();
+    let reach: Vec<f64> = world.grains.iter().map(|g| g.radius).collect();
+    let mut list = sdem::geometry::broadphase::NeighborList::new(0.2 * 0.012);
+    bencher
+        .counter(divan::counter::ItemsCount::new(centers.len()))
+        .bench_local(|| {
+            list.build(black_box(&centers), black_box(&reach));
+        });
+}

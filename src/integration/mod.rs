@@ -523,6 +523,9 @@ impl World {
             // Both lists are sorted by (i, j), so each chunk of the new list merges with the
             // old one from where its first pair would be: a parallel pass, where a serial
             // merge was the largest part of a rebuild that a second thread could not share.
+            // Only what the pair pass reads is written (the hint and the spring; the flag so
+            // that no slot claims a contact): that pass rewrites every record before anything
+            // else reads one.
             let pairs = &self.neighbors.pairs;
             self.pair_contacts
                 .resize(pairs.len(), PairContact::default());
@@ -535,10 +538,13 @@ impl World {
                         while k < old_pairs.len() && old_pairs[k] < *pair {
                             k += 1;
                         }
-                        *slot = PairContact::default();
-                        if k < old_pairs.len() && old_pairs[k] == *pair {
-                            (slot.hint, slot.tangential_history) = carried[k];
-                        }
+                        (slot.hint, slot.tangential_history) =
+                            if k < old_pairs.len() && old_pairs[k] == *pair {
+                                carried[k]
+                            } else {
+                                (PairHint::default(), 0.0)
+                            };
+                        slot.active = false;
                     }
                 });
         }
