@@ -277,6 +277,35 @@ fn results_are_bitwise_identical_with_one_and_two_threads() {
 }
 
 #[test]
+fn results_do_not_depend_on_the_neighbour_list_skin() {
+    // Expectation: the candidate list only decides which pairs are tested. Contacts are summed
+    // in pair order (i, j) whatever else the list holds, a pair in contact is always listed,
+    // and its search hint and tangential spring carry over a rebuild; a wrong or missing hint
+    // costs more tests, never another result. So a thin skin (many builds, few candidates) and
+    // a thick one give the same bits. Frictional, so that the springs must carry over.
+    let run = |skin_fraction: f64| {
+        let mut world = sdem::run::bench::dense_packing(400, 1.0);
+        sdem::run::bench::with_friction(&mut world, 0.5);
+        world.neighbors.skin = skin_fraction * 0.012;
+        for _ in 0..300 {
+            world.step().unwrap();
+        }
+        world
+    };
+    let (thin, thick) = (run(0.05), run(0.5));
+    assert!(
+        thin.neighbors.builds > thick.neighbors.builds + 5,
+        "{} builds against {}",
+        thin.neighbors.builds,
+        thick.neighbors.builds
+    );
+    assert!(thin.totals.contacts > 300 && thin.totals.sliding_contacts > 0);
+    assert_eq!(thin.totals, thick.totals);
+    assert_eq!(thin.grains, thick.grains);
+    assert_eq!(thin.contact_history(), thick.contact_history());
+}
+
+#[test]
 fn volumetric_and_full_levels_agree_under_isotropic_load() {
     // Expectation (SPEC §1): under an exactly isotropic load the full grain stays circular, so
     // level 1 (eps1 = eps2) and level 3 give the same state. Four walls squeeze one grain.

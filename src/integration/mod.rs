@@ -14,7 +14,9 @@
 //! `(1/A) sum sym(f_i ⊗ d)`.
 //!
 //! Sums over grains (wall forces, areas, energies) are taken per fixed-size chunk and the chunk
-//! sums added in order.
+//! sums added in order; sums over contacts, per chunk of the pairs whose first grains form one
+//! such chunk, so that they depend neither on the thread count nor on when the neighbour list
+//! was built.
 
 pub mod instability;
 pub mod parameters;
@@ -41,8 +43,10 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Grains per chunk of the parallel passes: fixed, so that every reduction is the same sum in
-/// the same order for any number of threads.
+/// the same order for any number of threads. The pair pass's chunks follow them (see
+/// [`pair_chunks_by_first_grain`]).
 pub const GRAIN_CHUNK: usize = 256;
+/// Pairs per chunk of the passes over the pair list that sum nothing (the rebuild's merge).
 pub const PAIR_CHUNK: usize = 512;
 /// Largest number of walls a world may have.
 pub const MAX_WALLS: usize = 8;
@@ -567,137 +571,139 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
-        let chunk_results: Vec<PairSums> = self
-            .pair_contacts
-            .par_chunks_mut(PAIR_CHUNK)
-            .enumerate()
-            .map(|(chunk, out)| {
-                let mut capped = 0;
-                let mut moment = [0.0; 3];
-                let mut failure = None;
-                let mut dissipation = 0.0;
-                let mut sliding = 0;
-                for (k, slot) in out.iter_mut().enumerate() {
-                    let p = chunk * PAIR_CHUNK + k;
-                    let [i, j] = pairs[p];
-                    let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
-                    // The centre of the second grain, or of its image that meets the first.
-                    let mut center_j = fj.shape.center;
-                    // In a periodic cell: the branch vector, and the affine field's `L d`.
-                    let mut branch = DVec2::ZERO;
-                    let mut affine_rate = DVec2::ZERO;
-                    if let Some((cell, velocity_gradient)) = &periodic {
-                        center_j += cell.image_shift(images[p]);
-                        branch = center_j - fi.shape.center;
-                        affine_rate = *velocity_gradient * branch;
-                    }
-                    let mut hint = slot.hint;
-                    let history = slot.tangential_history;
-                    let overlap = if fi.circle && fj.circle {
-                        disc_disc(
-                            fi.shape.center,
-                            fi.shape.bounding_radius,
-                            center_j,
-                            fj.shape.bounding_radius,
-                        )
-                    } else {
-                        let shape_j = GrainShape {
-                            center: center_j,
-                            ..fj.shape
-                        };
-                        grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
-                    };
-                    // Each outcome writes the slot once: an open or failed pair keeps only its
-                    // search hint (its spring resets), a contact the whole record.
-                    let open = PairContact {
-                        hint,
-                        ..Default::default()
-                    };
-                    *slot = match overlap {
-                        Overlap::Separate => open,
-                        Overlap::Swallowed => {
-                            failure.get_or_insert(Instability::Swallowed {
-                                step,
-                                grain: i as usize,
-                                other: Some(j as usize),
-                            });
-                            open
+        let chunk_results: Vec<PairSums> =
+            pair_chunks_by_first_grain(pairs, &mut self.pair_contacts, self.grains.len())
+                .into_par_iter()
+                .map(|(first_pair, out)| {
+                    let mut capped = 0;
+                    let mut moment = [0.0; 3];
+                    let mut failure = None;
+                    let mut dissipation = 0.0;
+                    let mut sliding = 0;
+                    for (k, slot) in out.iter_mut().enumerate() {
+                        let p = first_pair + k;
+                        let [i, j] = pairs[p];
+                        let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
+                        // The centre of the second grain, or of its image that meets the first.
+                        let mut center_j = fj.shape.center;
+                        // In a periodic cell: the branch vector, and the affine field's `L d`.
+                        let mut branch = DVec2::ZERO;
+                        let mut affine_rate = DVec2::ZERO;
+                        if let Some((cell, velocity_gradient)) = &periodic {
+                            center_j += cell.image_shift(images[p]);
+                            branch = center_j - fi.shape.center;
+                            affine_rate = *velocity_gradient * branch;
                         }
-                        Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
-                            Err(exit) => {
-                                failure.get_or_insert(Instability::ContactDomain {
+                        let mut hint = slot.hint;
+                        let history = slot.tangential_history;
+                        let overlap = if fi.circle && fj.circle {
+                            disc_disc(
+                                fi.shape.center,
+                                fi.shape.bounding_radius,
+                                center_j,
+                                fj.shape.bounding_radius,
+                            )
+                        } else {
+                            let shape_j = GrainShape {
+                                center: center_j,
+                                ..fj.shape
+                            };
+                            grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
+                        };
+                        // Each outcome writes the slot once: an open or failed pair keeps only its
+                        // search hint (its spring resets), a contact the whole record.
+                        let open = PairContact {
+                            hint,
+                            ..Default::default()
+                        };
+                        *slot = match overlap {
+                            Overlap::Separate => open,
+                            Overlap::Swallowed => {
+                                failure.get_or_insert(Instability::Swallowed {
                                     step,
                                     grain: i as usize,
                                     other: Some(j as usize),
-                                    length: exit.length,
-                                    normal_gap: exit.normal_gap,
                                 });
                                 open
                             }
-                            Ok(response) => {
-                                let velocity_j =
-                                    fj.velocity + fj.velocity_gradient * (c.point - center_j);
-                                let relative_velocity =
-                                    velocity_j - fi.velocity_at(c.point) + affine_rate;
-                                let gap_rate = relative_velocity.dot(c.normal);
-                                let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
-                                capped += response.capped as u64;
-                                let force = damped_normal_force(
-                                    response.force,
-                                    response.stiffness,
-                                    effective_mass,
-                                    params.contact_damping,
-                                    gap_rate,
-                                );
-                                let tangential = match &params.friction {
-                                    Some(friction) if friction.grains > 0.0 => {
-                                        friction.law.response(
-                                            history,
-                                            response.stiffness,
-                                            force,
-                                            relative_velocity.dot(c.normal.perp()),
-                                            friction.grains,
-                                            effective_mass,
-                                            params.dt,
-                                        )
+                            Overlap::Contact(c) => {
+                                match params.law.response(c.length, c.normal_gap) {
+                                    Err(exit) => {
+                                        failure.get_or_insert(Instability::ContactDomain {
+                                            step,
+                                            grain: i as usize,
+                                            other: Some(j as usize),
+                                            length: exit.length,
+                                            normal_gap: exit.normal_gap,
+                                        });
+                                        open
                                     }
-                                    _ => TangentialResponse::default(),
-                                };
-                                dissipation += tangential.dissipated;
-                                sliding += tangential.sliding as u64;
-                                PairContact {
-                                    active: true,
-                                    normal: c.normal,
-                                    force,
-                                    point: c.point,
-                                    length: c.length,
-                                    normal_gap: c.normal_gap,
-                                    cap_area_first: c.cap_area_i,
-                                    cap_area_second: c.cap_area_j,
-                                    capped: response.capped,
-                                    tangential_force: tangential.force,
-                                    tangential_history: tangential.history,
-                                    hint,
+                                    Ok(response) => {
+                                        let velocity_j = fj.velocity
+                                            + fj.velocity_gradient * (c.point - center_j);
+                                        let relative_velocity =
+                                            velocity_j - fi.velocity_at(c.point) + affine_rate;
+                                        let gap_rate = relative_velocity.dot(c.normal);
+                                        let effective_mass =
+                                            fi.mass * fj.mass / (fi.mass + fj.mass);
+                                        capped += response.capped as u64;
+                                        let force = damped_normal_force(
+                                            response.force,
+                                            response.stiffness,
+                                            effective_mass,
+                                            params.contact_damping,
+                                            gap_rate,
+                                        );
+                                        let tangential = match &params.friction {
+                                            Some(friction) if friction.grains > 0.0 => {
+                                                friction.law.response(
+                                                    history,
+                                                    response.stiffness,
+                                                    force,
+                                                    relative_velocity.dot(c.normal.perp()),
+                                                    friction.grains,
+                                                    effective_mass,
+                                                    params.dt,
+                                                )
+                                            }
+                                            _ => TangentialResponse::default(),
+                                        };
+                                        dissipation += tangential.dissipated;
+                                        sliding += tangential.sliding as u64;
+                                        PairContact {
+                                            active: true,
+                                            normal: c.normal,
+                                            force,
+                                            point: c.point,
+                                            length: c.length,
+                                            normal_gap: c.normal_gap,
+                                            cap_area_first: c.cap_area_i,
+                                            cap_area_second: c.cap_area_j,
+                                            capped: response.capped,
+                                            tangential_force: tangential.force,
+                                            tangential_history: tangential.history,
+                                            hint,
+                                        }
+                                    }
                                 }
                             }
-                        },
-                    };
-                    if slot.active && periodic.is_some() {
-                        let share = symmetric_dyad(slot.force_on_first(), branch);
-                        for (sum, x) in moment.iter_mut().zip(share) {
-                            *sum += x;
+                        };
+                        if slot.active && periodic.is_some() {
+                            let share = symmetric_dyad(slot.force_on_first(), branch);
+                            for (sum, x) in moment.iter_mut().zip(share) {
+                                *sum += x;
+                            }
                         }
                     }
-                }
-                PairSums {
-                    capped,
-                    moment,
-                    dissipation,
-                    sliding,
-                    failure,
-                }
-            })
-            .collect();
+                    PairSums {
+                        capped,
+                        moment,
+                        dissipation,
+                        sliding,
+                        failure,
+                    }
+                })
+                .collect();
         let mut totals = PairSums::default();
         for sums in chunk_results {
             if let Some(f) = sums.failure {
@@ -995,6 +1001,35 @@ impl World {
         let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
         (z, z_nr, z_nr3)
     }
+}
+
+/// The pair records cut into one chunk per grain chunk ([`GRAIN_CHUNK`]): chunk c holds the
+/// pairs whose first grain lies in grain chunk c (the list is sorted by first grain), with the
+/// index of its first pair.
+///
+/// The pair pass sums each chunk's contacts (the dissipation, a periodic cell's stress) in
+/// pair order and then the chunks in order. Chunks of a fixed number of pairs would group
+/// those sums by how many open candidates the list holds, so their last bits would follow
+/// when the list was built (a resumed run rebuilds it at once, a thinner skin more often).
+/// Aligned with the grains, each chunk sums the same contacts in the same order whatever else
+/// the list holds.
+fn pair_chunks_by_first_grain<'a>(
+    pairs: &[[u32; 2]],
+    records: &'a mut [PairContact],
+    grains: usize,
+) -> Vec<(usize, &'a mut [PairContact])> {
+    let mut chunks = Vec::with_capacity(grains.div_ceil(GRAIN_CHUNK));
+    let mut rest = records;
+    let mut start = 0;
+    for chunk in 0..grains.div_ceil(GRAIN_CHUNK) {
+        let end = pairs.partition_point(|pair| (pair[0] as usize) < (chunk + 1) * GRAIN_CHUNK);
+        let (records, tail) = std::mem::take(&mut rest).split_at_mut(end - start);
+        chunks.push((start, records));
+        rest = tail;
+        start = end;
+    }
+    debug_assert!(rest.is_empty(), "every pair's first grain is a grain");
+    chunks
 }
 
 /// The sums a grain needs from its contacts.
