@@ -64,7 +64,11 @@ fn disc_wall(bencher: divan::Bencher) {
 
 #[divan::bench(args = [1000, 10000], sample_count = 20)]
 fn step_dense_packing(bencher: divan::Bencher, grains: usize) {
-    let mut world = sdem::run::bench::dense_packing(grains, 1.0);
+    time_steps(bencher, sdem::run::bench::dense_packing(grains, 1.0));
+}
+
+/// Times `world.step()`, counted in grain-steps, after one untimed step.
+fn time_steps(bencher: divan::Bencher, mut world: sdem::integration::World) {
     world.step().unwrap();
     bencher
         .counter(divan::counter::ItemsCount::new(world.grains.len()))
@@ -120,12 +124,7 @@ mod sparse_lu {
 fn step_dense_packing_rigid(bencher: divan::Bencher, grains: usize) {
     let mut world = sdem::run::bench::dense_packing(grains, 1.0);
     sdem::run::bench::with_model(&mut world, sdem::grain::ModelLevel::Rigid);
-    world.step().unwrap();
-    bencher
-        .counter(divan::counter::ItemsCount::new(world.grains.len()))
-        .bench_local(|| {
-            world.step().unwrap();
-        });
+    time_steps(bencher, world);
 }
 
 /// The whole step on the dense packing spread apart by 15% (φ about 0.68), every grain a rigid
@@ -144,11 +143,7 @@ fn step_loose_rigid(bencher: divan::Bencher, grains: usize) {
     }
     world.step().unwrap();
     assert_eq!(world.totals.contacts, 0, "a loose packing without contacts");
-    bencher
-        .counter(divan::counter::ItemsCount::new(world.grains.len()))
-        .bench_local(|| {
-            world.step().unwrap();
-        });
+    time_steps(bencher, world);
 }
 
 /// A neighbour-list build on the dense packing's centres (skin 0.2 of the mean radius, as
