@@ -66,6 +66,38 @@ fn compressed(nu: f64, phi: f64, relax: usize) -> World {
     world
 }
 
+/// Expectation: the contact stress of the cell is summed over each grain chunk's contacts in
+/// pair order, whatever else the neighbour list holds, so a thin skin (many builds, few
+/// candidates) and a thick one give the same cell stress, bit for bit, at every step; a stress
+/// control feeds it back into the cell's motion.
+#[test]
+fn the_cell_stress_does_not_depend_on_the_neighbour_list_skin() {
+    let start = compressed(0.5, 0.84, 0);
+    let run = |skin: f64| {
+        let mut world = start.clone();
+        world.neighbors.skin = skin;
+        world.neighbors.invalidate();
+        let mut stresses = Vec::new();
+        for _ in 0..300 {
+            drive_isotropic(&mut world, 5e-2);
+            world.step().unwrap();
+            stresses.push(world.totals.cell_stress.map(f64::to_bits));
+        }
+        (stresses, world)
+    };
+    let (thin, thin_world) = run(0.05 * 0.012);
+    let (thick, thick_world) = run(0.5 * 0.012);
+    assert!(
+        thin_world.neighbors.builds > thick_world.neighbors.builds + 5,
+        "{} builds against {}",
+        thin_world.neighbors.builds,
+        thick_world.neighbors.builds
+    );
+    assert!(thin_world.totals.contacts > 100);
+    assert_eq!(thin, thick);
+    assert_eq!(thin_world.grains, thick_world.grains);
+}
+
 /// Expectation: at every step of a compaction, every pair of grains whose bounding circles
 /// overlap (minimum image, brute force over all pairs) is in the neighbour list with that
 /// image: the Verlet criterion of a deforming cell misses no pair.
