@@ -24,10 +24,9 @@ pub struct ContourTable {
     /// `vertex` three times over, so that `vertex_at(k)` needs no modulo for k in [-N, 2N),
     /// the range every chain search stays in.
     vertex_ring: Vec<DVec2>,
-    /// Unit outward normal of edge k (from node k to node k+1), at angle `(k + 1/2) dbeta`.
-    pub edge_normal: Vec<DVec2>,
-    /// Edge k's ends and normal side by side: the hot loops that walk edges load one record
-    /// (one bounds check) instead of three.
+    /// Edge k (from node k to node k+1) with its unit outward normal, at angle
+    /// `(k + 1/2) dbeta`: ends and normal side by side, so the hot loops that walk edges load
+    /// one record (one bounds check) instead of three.
     edges: Vec<Edge>,
     /// Distance from the centre to every edge of the unit polygon: `cos(dbeta / 2)`.
     pub apothem: f64,
@@ -59,17 +58,14 @@ impl ContourTable {
             .chain(&vertex)
             .copied()
             .collect();
-        let edge_normal: Vec<DVec2> = (0..nodes)
+        let edges = (0..nodes)
             .map(|k| {
                 let (s, c) = ((k as f64 + 0.5) * dbeta).sin_cos();
-                DVec2::new(c, s)
-            })
-            .collect();
-        let edges = (0..nodes)
-            .map(|k| Edge {
-                start: vertex[k],
-                end: vertex[(k + 1) % nodes],
-                normal: edge_normal[k],
+                Edge {
+                    start: vertex[k],
+                    end: vertex[(k + 1) % nodes],
+                    normal: DVec2::new(c, s),
+                }
             })
             .collect();
         Self {
@@ -77,7 +73,6 @@ impl ContourTable {
             dbeta,
             vertex,
             vertex_ring,
-            edge_normal,
             edges,
             apothem: (0.5 * dbeta).cos(),
             apothem_squared: (0.5 * dbeta).cos().powi(2),
@@ -173,7 +168,7 @@ impl ContourTable {
     /// `< 1` strictly inside, `1` on the boundary, `> 1` outside.
     #[inline]
     pub fn gauge(&self, u: DVec2, sector: usize) -> f64 {
-        u.dot(self.edge_normal[sector]) / self.apothem
+        u.dot(self.edge(sector).normal) / self.apothem
     }
 
     /// Whether `u` lies strictly inside the unit polygon. The inscribed circle (radius =
@@ -228,7 +223,7 @@ impl ContourTable {
         let mut best = 1.0_f64;
         let mut s = sector_inside;
         for _ in 0..=steps {
-            let normal = self.edge_normal[s];
+            let normal = self.edge(s).normal;
             let rate = d.dot(normal);
             if rate > 0.0 {
                 let t = (self.apothem - inside.dot(normal)) / rate;
@@ -394,7 +389,7 @@ mod tests {
             let v = table.vertex[k] * 0.999_999_999;
             let s = table.sector(v);
             assert!(table.gauge(v, s) < 1.0);
-            let mid = table.edge_normal[k] * table.apothem;
+            let mid = table.edge(k).normal * table.apothem;
             let s = table.sector(mid);
             assert_eq!(s, k);
             assert!((table.gauge(mid, s) - 1.0).abs() < 1e-12);

@@ -843,7 +843,7 @@ pub(super) mod tests {
             let d = p_out - p_in;
             let t = (0..n)
                 .filter_map(|s| {
-                    let normal = table.edge_normal[s];
+                    let normal = table.edge(s).normal;
                     let rate = d.dot(normal);
                     (rate > 0.0).then(|| (table.apothem - p_in.dot(normal)) / rate)
                 })
