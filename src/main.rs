@@ -647,6 +647,14 @@ fn run(cli: Cli) -> Result<()> {
             if parsed.gravity != (0.0, 0.0) {
                 println!("gravity: ({}, {})", parsed.gravity.0, parsed.gravity.1);
             }
+            if parsed.deformation.mass_scale != 1.0 {
+                println!(
+                    "deformation mass scale: M_eps and M_alpha x {} (for quasi-static runs: the \
+                     strains respond {:.3} times slower)",
+                    parsed.deformation.mass_scale,
+                    parsed.deformation.mass_scale.sqrt()
+                );
+            }
             if let Some(a) = parsed.parameters().adaptive {
                 println!(
                     "adaptive model level: time step {:.4e} while every grain is rigid (critical {:.4e})",

@@ -7,7 +7,7 @@ use common::grain_bits;
 use sdem::boundary::walls::{Wall, box_walls};
 use sdem::grain::adaptive::stress_invariants;
 use sdem::grain::{AdaptiveSettings, Grain, GrainLevel, Material, ModelLevel};
-use sdem::integration::parameters::{Adaptive, critical_time_step};
+use sdem::integration::parameters::{Adaptive, ModeSettings, critical_time_step};
 use sdem::integration::{Instability, Parameters, World};
 use sdem::run::bench::dense_packing;
 use sdem::run::checkpoint::Checkpoint;
@@ -32,7 +32,7 @@ fn adaptive_params(poisson: f64, radius: f64, settings: AdaptiveSettings) -> Par
         &p.material,
         &p.law,
         radius,
-        0.0,
+        ModeSettings::default(),
     ));
     p
 }
@@ -310,7 +310,7 @@ fn rigid_step_is_stable_on_a_dense_packing_of_rigid_grains() {
             &p.material,
             &p.law,
             0.5 * 0.024,
-            0.0,
+            ModeSettings::default(),
         ));
         let mut world = World::new(p, dense.grains.clone(), dense.walls.clone());
         for _ in 0..3000 {

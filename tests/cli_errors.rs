@@ -418,6 +418,23 @@ fn non_positive_young_modulus() {
 }
 
 #[test]
+fn deformation_mass_scale_below_one() {
+    let scratch = Scratch::new("mass_scale");
+    for (value, shown) in [("0.5", "0.5"), ("0.0", "0"), ("-4.0", "-4")] {
+        let text = variant(
+            "alpha_mass_scale: 1.0)",
+            &format!("alpha_mass_scale: 1.0, mass_scale: {value})"),
+        );
+        check_fails(
+            &scratch,
+            value,
+            &text,
+            &["deformation.mass_scale", &format!("= {shown}"), ">= 1"],
+        );
+    }
+}
+
+#[test]
 fn non_positive_density() {
     let scratch = Scratch::new("density");
     for (value, shown) in [("0.0", "0"), ("-2.0", "-2")] {
@@ -660,6 +677,11 @@ fn non_finite_numbers_name_their_field() {
             "deformation.alpha_mass_scale",
             "alpha_mass_scale: 1.0",
             "alpha_mass_scale: X",
+        ),
+        (
+            "deformation.mass_scale",
+            "alpha_mass_scale: 1.0)",
+            "alpha_mass_scale: 1.0, mass_scale: X)",
         ),
         (
             "time_step.FractionOfCritical",

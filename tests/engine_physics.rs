@@ -101,6 +101,39 @@ fn squeezed_grain_shortens_along_the_load_and_its_stress_balances_love_weber() {
 }
 
 #[test]
+fn the_deformation_mass_scale_slows_the_strain_but_not_where_it_settles() {
+    // Expectation (SPEC §4 with M_eps scaled by s): from rest, the first step gives the strain
+    // the rate (unbalanced stress / M_eps) dt, 1/s of the unscaled one, while the centre moves
+    // alike; the equilibrium (grain stress = Love–Weber stress) involves no mass, so both
+    // settle to the same shape and wall force.
+    let r = 0.5;
+    let mut own = squeezed_grain(0.3, r, 0.9, 0.0);
+    let mut scaled = squeezed_grain(0.3, r, 0.9, 0.0);
+    scaled.params.deformation_mass_scale = 4.0;
+    own.step().unwrap();
+    scaled.step().unwrap();
+    let (a, b) = (own.grains[0], scaled.grains[0]);
+    assert!(a.eps1_rate != 0.0 && a.eps2_rate < 0.0, "{a:?}");
+    for (unscaled, with_scale) in [(a.eps1_rate, b.eps1_rate), (a.eps2_rate, b.eps2_rate)] {
+        let ratio = with_scale / unscaled;
+        assert!((ratio - 0.25).abs() < 1e-12, "rate ratio {ratio}");
+    }
+    assert_eq!(a.velocity, b.velocity);
+    settle(&mut own, 20_000);
+    settle(&mut scaled, 20_000);
+    let (a, b) = (own.grains[0], scaled.grains[0]);
+    assert!(a.eps2 < -1e-3, "squeezed: eps2 = {}", a.eps2);
+    for (x, y) in [(a.eps1, b.eps1), (a.eps2, b.eps2)] {
+        assert!(
+            (x - y).abs() < 1e-6 * x.abs(),
+            "settled strains {x} and {y}"
+        );
+    }
+    let (f, g) = (own.totals.wall_force[0], scaled.totals.wall_force[0]);
+    assert!((f - g).abs() < 1e-6 * f.abs(), "wall forces {f} and {g}");
+}
+
+#[test]
 fn incompressible_grain_keeps_its_area() {
     // Expectation (SPEC §6): pi R^2 (1+eps1)(1+eps2) - sum S_j = pi R^2 for nu = 0.5.
     let r = 0.5;

@@ -8,7 +8,7 @@ use glam::DVec2;
 use sdem::boundary::walls::Wall;
 use sdem::contact::friction::FrictionSettings;
 use sdem::grain::{Grain, Material, ModelLevel};
-use sdem::integration::parameters::{Friction, frictional_critical_time_step};
+use sdem::integration::parameters::{Friction, ModeSettings, frictional_critical_time_step};
 use sdem::integration::{Parameters, World};
 use sdem::scenario::Scenario;
 
@@ -32,7 +32,11 @@ fn frictional_params(level: ModelLevel, poisson: f64, mu: f64, damping: f64) -> 
         ..Default::default()
     };
     p.friction = Friction::new(&settings, &[mu]);
-    p.dt = 0.4 * frictional_critical_time_step(&p.material, &p.law, RADIUS, level, 1.0);
+    let modes = ModeSettings {
+        tangential_ratio: 1.0,
+        ..Default::default()
+    };
+    p.dt = 0.4 * frictional_critical_time_step(&p.material, &p.law, RADIUS, level, modes);
     p.gravity = DVec2::new(0.0, -G);
     p
 }
@@ -152,7 +156,7 @@ fn a_sliding_disc_dissipates_its_kinetic_energy_by_coulomb_friction() {
     world.grains[0].velocity = DVec2::new(v0, 0.0);
     let x0 = world.grains[0].center.x;
     let density = world.params.material.density;
-    let kinetic = |w: &World| w.grains[0].kinetic_energy(density);
+    let kinetic = |w: &World| w.grains[0].kinetic_energy(density, 1.0);
     let k0 = kinetic(&world);
     let mut dissipated = 0.0;
     let mut steps = 0;

@@ -3,7 +3,9 @@
 use glam::DVec2;
 use sdem::boundary::walls::box_walls;
 use sdem::grain::{Grain, Material, ModelLevel};
-use sdem::integration::parameters::critical_time_step;
+use sdem::integration::parameters::{
+    ModeSettings, critical_time_step, frictional_critical_time_step,
+};
 use sdem::integration::{Instability, Parameters, World};
 use sdem::run::bench::dense_packing;
 
@@ -17,6 +19,50 @@ fn dense_run(fraction: f64, steps: usize) -> Result<World, Instability> {
         world.step()?;
     }
     Ok(world)
+}
+
+/// [`dense_run`] with the deformation masses scaled by `mass_scale` and the time step `dt`.
+fn dense_run_mass_scaled(mass_scale: f64, dt: f64, steps: usize) -> Result<World, Instability> {
+    let mut world = dense_packing(400, 1.0);
+    world.params.deformation_mass_scale = mass_scale;
+    world.params.dt = dt;
+    for _ in 0..steps {
+        world.step()?;
+    }
+    Ok(world)
+}
+
+#[test]
+fn mass_scaled_strains_take_a_longer_step_stably_and_are_stopped_above_it() {
+    // Expectation (stiffest_modes): with M_eps scaled by s a contact force moves the strain DoF
+    // 4/s times as far as the centre, so the contact mode's coupling is 1 + 4/s and the critical
+    // step grows by sqrt(5 / (1 + 4/s)): sqrt(2.5) for s = 4. Measured on this packing, the
+    // boundary lies between 1.1 and 1.2 of the scaled estimate for s = 4 (1.05–1.1 unscaled).
+    let world = dense_packing(400, 1.0);
+    let p = &world.params;
+    let estimate = |mass_scale: f64| {
+        let modes = ModeSettings {
+            deformation_mass_scale: mass_scale,
+            ..Default::default()
+        };
+        frictional_critical_time_step(&p.material, &p.law, 0.5 * 0.024, p.level, modes)
+    };
+    let gain = estimate(4.0) / estimate(1.0);
+    assert!((gain - 2.5_f64.sqrt()).abs() < 1e-12, "gain {gain}");
+    // One step, 0.9 of the scaled estimate (1.42 of the unscaled one): the grains' own inertia
+    // goes unstable and is stopped by a diagnostic, the scaled masses run stable.
+    let dt = 0.9 * estimate(4.0);
+    let unscaled = dense_run_mass_scaled(1.0, dt, 3000).expect_err("unscaled above its limit");
+    assert!(
+        !matches!(unscaled, Instability::NonFinite { .. }),
+        "caught only as NaN: {unscaled}"
+    );
+    let scaled = dense_run_mass_scaled(4.0, dt, 3000).expect("stable below the scaled estimate");
+    assert!(scaled.totals.contacts > 1000);
+    // The scaled estimate is still a limit: twice it is stopped.
+    let err = dense_run_mass_scaled(4.0, 2.0 * estimate(4.0), 3000)
+        .expect_err("unstable above the scaled estimate");
+    assert!(!matches!(err, Instability::NonFinite { .. }), "{err}");
 }
 
 #[test]
@@ -92,7 +138,12 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
             b.velocity = DVec2::new(-0.01, 0.0);
             World::new(params, vec![a, b], Vec::new())
         };
-        let energy = |w: &World| w.grains.iter().map(|g| g.kinetic_energy(1.0)).sum::<f64>();
+        let energy = |w: &World| {
+            w.grains
+                .iter()
+                .map(|g| g.kinetic_energy(1.0, 1.0))
+                .sum::<f64>()
+        };
         let initial = energy(&world);
         let (mut touched, mut open) = (false, false);
         while !open {
@@ -135,7 +186,12 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
             }
         }
         let mut world = World::new(params, grains, box_walls(0.0, 1.0, 0.0, 1.0));
-        let energy = |w: &World| w.grains.iter().map(|g| g.kinetic_energy(1.0)).sum::<f64>();
+        let energy = |w: &World| {
+            w.grains
+                .iter()
+                .map(|g| g.kinetic_energy(1.0, 1.0))
+                .sum::<f64>()
+        };
         let initial = energy(&world);
         let duration = 150.0;
         let mut collisions = 0u64;

@@ -161,8 +161,9 @@ impl Grain {
         j * self.omega + rot * du * u.inverse() * rot.transpose()
     }
 
-    /// Kinetic energy of all six degrees of freedom.
-    pub fn kinetic_energy(&self, density: f64) -> f64 {
+    /// Kinetic energy of all six degrees of freedom, with the deformation DoF's masses scaled by
+    /// `deformation_mass_scale` (1: the grain's own inertia).
+    pub fn kinetic_energy(&self, density: f64, deformation_mass_scale: f64) -> f64 {
         let rigid_body = 0.5 * self.mass(density) * self.velocity.length_squared()
             + 0.5 * self.rotational_inertia(density) * self.omega * self.omega;
         // A grain whose deformation rates are zero (every rigid grain) would add +0 twice to a
@@ -170,11 +171,15 @@ impl Grain {
         if self.eps1_rate == 0.0 && self.eps2_rate == 0.0 && self.alpha_rate == 0.0 {
             return rigid_body;
         }
+        // The masses the step integrates: M_eps and M_alpha times the deformation mass scale.
         rigid_body
             + 0.5
-                * self.strain_inertia(density)
+                * (deformation_mass_scale * self.strain_inertia(density))
                 * (self.eps1_rate * self.eps1_rate + self.eps2_rate * self.eps2_rate)
-            + 0.5 * self.alpha_inertia(density) * self.alpha_rate * self.alpha_rate
+            + 0.5
+                * (deformation_mass_scale * self.alpha_inertia(density))
+                * self.alpha_rate
+                * self.alpha_rate
     }
 }
 

@@ -857,7 +857,8 @@ impl World {
                         sums.failure.get_or_insert(e);
                     }
                     sums.totals.grain_area += update.area;
-                    sums.totals.kinetic_energy += grain.kinetic_energy(params.material.density);
+                    sums.totals.kinetic_energy += grain
+                        .kinetic_energy(params.material.density, params.deformation_mass_scale);
                     if cell.is_some() {
                         let m = grain.mass(params.material.density);
                         let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
@@ -1127,8 +1128,10 @@ fn advance_grain(
     grain.center += grain.velocity * dt;
     grain.theta += grain.omega * dt;
 
-    // Deformation (tension positive, eq. 4 of SPEC): eps_dd = 4 s / (rho R^2) - gamma rate.
-    let inv_modal_mass = 4.0 / (density * grain.radius * grain.radius);
+    // Deformation (tension positive, eq. 4 of SPEC): eps_dd = 4 s / (rho R^2) - gamma rate,
+    // M_eps scaled by the deformation mass scale.
+    let inv_modal_mass =
+        4.0 / (density * grain.radius * grain.radius * params.deformation_mass_scale);
     let damping = params.deformation_damping;
     let (s11, s22) = (ext11 - sigma1, ext22 - sigma2);
     match level.level {

@@ -22,8 +22,13 @@ pub struct Parameters {
     pub deformation_damping: f64,
     /// k_alpha of eq. 60.
     pub k_alpha: f64,
-    /// Mass-scaling factor on M_alpha (1 = none).
+    /// Mass-scaling factor on M_alpha (1 = none), on top of `deformation_mass_scale`.
     pub alpha_mass_scale: f64,
+    /// Mass-scaling factor on the generalized masses of the deformation DoF, M_eps and M_alpha
+    /// (1 = none; for quasi-static runs): the strain responds `sqrt(s)` times slower and, with
+    /// it, the contact mode that pushes the strain DoF, which sets the deformable levels'
+    /// critical step (see [`stiffest_modes`]).
+    pub deformation_mass_scale: f64,
     /// Time step.
     pub dt: f64,
     /// Verlet skin, as a fraction of the mean radius.
@@ -81,10 +86,19 @@ impl Parameters {
             deformation_damping: 1.0,
             k_alpha: 1e-3,
             alpha_mass_scale: 1.0,
+            deformation_mass_scale: 1.0,
             dt,
             skin_fraction: 0.2,
             friction: None,
             gravity: DVec2::ZERO,
+        }
+    }
+
+    /// What, besides material, law, size and level, sets these parameters' critical step.
+    pub fn mode_settings(&self) -> ModeSettings {
+        ModeSettings {
+            tangential_ratio: Friction::tangential_ratio(&self.friction),
+            deformation_mass_scale: self.deformation_mass_scale,
         }
     }
 }
@@ -107,20 +121,33 @@ impl Adaptive {
         material: &Material,
         law: &SecantLaw,
         min_radius: f64,
-        tangential_ratio: f64,
+        modes: ModeSettings,
     ) -> Self {
         Self {
             settings,
             dt: ModelLevel::ALL.map(|level| {
-                fraction
-                    * frictional_critical_time_step(
-                        material,
-                        law,
-                        min_radius,
-                        level,
-                        tangential_ratio,
-                    )
+                fraction * frictional_critical_time_step(material, law, min_radius, level, modes)
             }),
+        }
+    }
+}
+
+/// What, besides the material, the contact law and the grain's size and level, sets the
+/// stiffest modes of a grain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModeSettings {
+    /// `r_t` of the frictional contacts ([`Friction::tangential_ratio`]), 0 without friction.
+    pub tangential_ratio: f64,
+    /// [`Parameters::deformation_mass_scale`]: 1 = the physical inertia of the strain DoF.
+    pub deformation_mass_scale: f64,
+}
+
+impl Default for ModeSettings {
+    /// Frictionless contacts, no mass scaling.
+    fn default() -> Self {
+        Self {
+            tangential_ratio: 0.0,
+            deformation_mass_scale: 1.0,
         }
     }
 }
@@ -128,20 +155,21 @@ impl Adaptive {
 /// Angular frequencies of the stiffest modes of a grain of radius `radius` (SPEC §9).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StiffestModes {
-    /// Principal-strain mode: `(2/R) sqrt(K/rho)`, K the stiffest strain mode of
-    /// [`Material::deformation_stiffness`] (`max(2 mu, 2 kappa)`; `2 mu` when incompressible).
+    /// Principal-strain mode: `(2/R) sqrt(K/(s rho))`, K the stiffest strain mode of
+    /// [`Material::deformation_stiffness`] (`max(2 mu, 2 kappa)`; `2 mu` when incompressible),
+    /// s the deformation mass scale.
     pub deformation: f64,
     /// Contact mode at the initial contact stiffness `k = E/a` in a dense packing:
     /// `sqrt(4 * coupling * 2k/m)`. Between two grains the mode is `sqrt(2k/m)` (m_eff = m/2);
-    /// `coupling` = 1 + 4 counts the push of a contact force on the strain DoF through the
-    /// Love–Weber stress (generalized mass m R^2/4 at lever arm R: four times the translational
+    /// `coupling` = 1 + 4/s counts the push of a contact force on the strain DoF through the
+    /// Love–Weber stress (generalized mass s m R^2/4 at lever arm R: 4/s times the translational
     /// response; 1 for rigid grains); the factor 4 is the stiffest lattice mode of a grain with
     /// six contacts, measured: the dense `sdem bench` packing goes unstable between 0.5 and 0.55
     /// of the single-contact estimate (tests/stability.rs).
     pub contact: f64,
     /// Tangential contact mode (friction, SPEC §13) at `K_t = r_t E/a`: the same lattice
     /// estimate with the tangential coupling 1 + 2 (translation, and rotation at lever arm R:
-    /// `R^2 m / M_theta = 2` for a disc), + 4 for the strain DoF of deformable grains. Measured
+    /// `R^2 m / M_theta = 2` for a disc), + 4/s for the strain DoF of deformable grains. Measured
     /// on the dense `sdem bench` packing with mu = 0.5 and `r_t = 1`: unstable between 1.15 and
     /// 1.2 of the resulting estimate at the full level, between 1.4 and 1.6 at the rigid level
     /// (tests/stability.rs). Zero without friction.
@@ -153,19 +181,27 @@ pub fn stiffest_modes(
     law: &SecantLaw,
     radius: f64,
     level: ModelLevel,
-    tangential_ratio: f64,
+    modes: ModeSettings,
 ) -> StiffestModes {
     let mass = material.density * std::f64::consts::PI * radius * radius;
-    let coupling = if level == ModelLevel::Rigid { 1.0 } else { 5.0 };
+    // Response of the strain DoF to a contact force, relative to the translational one.
+    let strain_coupling = if level == ModelLevel::Rigid {
+        0.0
+    } else {
+        4.0 / modes.deformation_mass_scale
+    };
+    let coupling = 1.0 + strain_coupling;
     let contact = (4.0 * law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
-    let tangential_coupling = if level == ModelLevel::Rigid { 3.0 } else { 7.0 };
-    let tangential = (4.0 * tangential_ratio * law.initial_stiffness() * 2.0 / mass
+    let tangential_coupling = 3.0 + strain_coupling;
+    let tangential = (4.0 * modes.tangential_ratio * law.initial_stiffness() * 2.0 / mass
         * tangential_coupling)
         .sqrt();
     let deformation = if level == ModelLevel::Rigid {
         0.0
     } else {
-        2.0 / radius * (material.deformation_stiffness() / material.density).sqrt()
+        2.0 / radius
+            * (material.deformation_stiffness() / (material.density * modes.deformation_mass_scale))
+                .sqrt()
     };
     StiffestModes {
         deformation,
@@ -190,20 +226,20 @@ pub fn critical_time_step(
     min_radius: f64,
     level: ModelLevel,
 ) -> f64 {
-    frictional_critical_time_step(material, law, min_radius, level, 0.0)
+    frictional_critical_time_step(material, law, min_radius, level, ModeSettings::default())
 }
 
 /// [`critical_time_step`] with frictional contacts of tangential stiffness ratio `r_t`
-/// (0: frictionless): the tangential mode is a mode of its own, so the stiffer of the normal
-/// and tangential contact modes counts.
+/// (0: frictionless) and a deformation mass scale: the tangential mode is a mode of its own, so
+/// the stiffer of the normal and tangential contact modes counts.
 pub fn frictional_critical_time_step(
     material: &Material,
     law: &SecantLaw,
     min_radius: f64,
     level: ModelLevel,
-    tangential_ratio: f64,
+    settings: ModeSettings,
 ) -> f64 {
-    let modes = stiffest_modes(material, law, min_radius, level, tangential_ratio);
+    let modes = stiffest_modes(material, law, min_radius, level, settings);
     let contact = modes.contact.max(modes.tangential);
     let omega_max = if material.is_incompressible() || level == ModelLevel::Rigid {
         modes.deformation.max(contact)
@@ -211,4 +247,48 @@ pub fn frictional_critical_time_step(
         (modes.deformation * modes.deformation + contact * contact).sqrt()
     };
     2.0 / omega_max
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn material(poisson: f64) -> Material {
+        Material {
+            young: 1.0,
+            poisson,
+            density: 1.0,
+        }
+    }
+
+    fn step(poisson: f64, level: ModelLevel, tangential_ratio: f64, mass_scale: f64) -> f64 {
+        let m = material(poisson);
+        let modes = ModeSettings {
+            tangential_ratio,
+            deformation_mass_scale: mass_scale,
+        };
+        frictional_critical_time_step(&m, &SecantLaw::new(m.young, 0.58, 2.0), 0.01, level, modes)
+    }
+
+    #[test]
+    fn the_mass_scale_moves_the_deformable_step_towards_the_rigid_one() {
+        // Expectation: coupling 1 + 4/s, so the step is sqrt(5 / (1 + 4/s)) times the unscaled
+        // one, tends to the rigid step as s grows, and leaves rigid grains alone.
+        for (s, gain) in [(1.0, 1.0), (4.0, 2.5_f64.sqrt()), (16.0, 2.0)] {
+            let ratio = step(0.5, ModelLevel::Full, 0.0, s) / step(0.5, ModelLevel::Full, 0.0, 1.0);
+            assert!((ratio - gain).abs() < 1e-12, "s = {s}: {ratio}");
+        }
+        let rigid = step(0.5, ModelLevel::Rigid, 0.0, 1.0);
+        assert_eq!(step(0.5, ModelLevel::Rigid, 0.0, 9.0), rigid);
+        let heavy = step(0.5, ModelLevel::Volumetric, 0.0, 1e12);
+        assert!((heavy / rigid - 1.0).abs() < 1e-9, "{heavy} vs {rigid}");
+        // Friction: the tangential coupling 3 + 4/s, 7 unscaled.
+        let frictional = |s| step(0.5, ModelLevel::Full, 1.0, s);
+        let ratio = frictional(4.0) / frictional(1.0);
+        assert!((ratio - (7.0_f64 / 4.0).sqrt()).abs() < 1e-12, "{ratio}");
+        // Compressible grains: the strain mode's stiffness is divided by s too, so the summed
+        // estimate scales like the contact mode alone when both are scaled to infinity.
+        let soft = step(0.3, ModelLevel::Full, 0.0, 1e12);
+        assert!((soft / step(0.3, ModelLevel::Rigid, 0.0, 1.0) - 1.0).abs() < 1e-9);
+    }
 }

@@ -100,7 +100,7 @@ pub fn with_friction(world: &mut World, mu: f64) {
             &p.law,
             0.5 * SPACING,
             p.level,
-            Friction::tangential_ratio(&p.friction),
+            p.mode_settings(),
         );
 }
 

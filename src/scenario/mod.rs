@@ -16,7 +16,9 @@ use crate::contact::friction::{COEFFICIENT_RANGE, FrictionSettings, is_coefficie
 use crate::grain::Grain;
 use crate::grain::{AdaptiveSettings, Material, ModelLevel};
 use crate::integration::Parameters;
-use crate::integration::parameters::{Adaptive, Friction, frictional_critical_time_step};
+use crate::integration::parameters::{
+    Adaptive, Friction, ModeSettings, frictional_critical_time_step,
+};
 use crate::meshfree::shape::{ShapeFileError, StarShape, read_shape_file};
 use crate::meshfree::{HyperelasticLaw, SolverSettings, TimeScheme};
 use crate::sample::file::{BoxBounds, SampleFileError, check_packing, read_grains};
@@ -604,8 +606,14 @@ pub struct DeformationSettings {
     pub damping: f64,
     /// k_alpha of eq. 60.
     pub k_alpha: f64,
-    /// Mass scaling of M_alpha (1 = none; only licit for quasi-static runs).
+    /// Mass scaling of M_alpha (1 = none; only licit for quasi-static runs), on top of
+    /// `mass_scale`.
     pub alpha_mass_scale: f64,
+    /// Mass scaling of the deformation DoF, M_eps and M_alpha (1 = none; only licit for
+    /// quasi-static runs): the strains respond sqrt(mass_scale) times slower, and the deformable
+    /// levels' critical step grows towards the rigid one (sqrt((1 + 4) / (1 + 4 / mass_scale))
+    /// times longer; docs/performance.md).
+    pub mass_scale: f64,
 }
 
 impl Default for DeformationSettings {
@@ -614,6 +622,7 @@ impl Default for DeformationSettings {
             damping: 1.0,
             k_alpha: 1e-3,
             alpha_mass_scale: 1.0,
+            mass_scale: 1.0,
         }
     }
 }
@@ -982,6 +991,13 @@ impl Scenario {
         non_negative("deformation.damping", d.damping)?;
         non_negative("deformation.k_alpha", d.k_alpha)?;
         positive("deformation.alpha_mass_scale", d.alpha_mass_scale)?;
+        if !(d.mass_scale.is_finite() && d.mass_scale >= 1.0) {
+            return Err(invalid(
+                "deformation.mass_scale",
+                num(d.mass_scale),
+                "a finite factor >= 1 (1 = the grains' own inertia)",
+            ));
+        }
         if c.damping == 0.0 {
             warnings.push("contact.damping = 0: nothing dissipates energy at contacts; a compaction will not be quasi-static".into());
         }
@@ -1187,6 +1203,14 @@ impl Scenario {
         Friction::tangential_ratio(&self.friction())
     }
 
+    /// Friction's tangential ratio and the deformation mass scale, for the critical step.
+    pub fn mode_settings(&self) -> ModeSettings {
+        ModeSettings {
+            tangential_ratio: self.tangential_ratio(),
+            deformation_mass_scale: self.deformation.mass_scale,
+        }
+    }
+
     /// The periodic cell's checks: SDEM only; a cell at least twice the interaction range wide;
     /// shear phases and shear-strain stops only in a periodic cell.
     fn validate_boundary(&self, warnings: &mut Vec<String>) -> Result<(), ScenarioError> {
@@ -1366,7 +1390,7 @@ impl Scenario {
             &self.secant_law(),
             self.smallest_radius(),
             self.model.level(),
-            self.tangential_ratio(),
+            self.mode_settings(),
         )
     }
 
@@ -1377,7 +1401,7 @@ impl Scenario {
             &self.secant_law(),
             self.smallest_radius(),
             ModelLevel::Rigid,
-            self.tangential_ratio(),
+            self.mode_settings(),
         )
     }
 
@@ -1418,7 +1442,7 @@ impl Scenario {
                 &self.material,
                 &self.secant_law(),
                 self.smallest_radius(),
-                self.tangential_ratio(),
+                self.mode_settings(),
             ),
             TimeStep::Fixed(dt) => Adaptive {
                 settings,
@@ -1435,6 +1459,7 @@ impl Scenario {
             deformation_damping: self.deformation.damping,
             k_alpha: self.deformation.k_alpha,
             alpha_mass_scale: self.deformation.alpha_mass_scale,
+            deformation_mass_scale: self.deformation.mass_scale,
             dt: self.time_step_value(),
             skin_fraction: self.contact.skin,
             friction: self.friction(),
