@@ -13,7 +13,7 @@ use sdem::run::bench::dense_packing;
 use sdem::run::checkpoint::Checkpoint;
 use sdem::run::{RunOptions, resume_run, run_scenario};
 use sdem::scenario::{Model, Scenario};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 fn material(poisson: f64) -> Material {
     Material {
@@ -350,7 +350,7 @@ fn scenario() -> Scenario {
     s
 }
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("adaptive", name)
 }
 

@@ -5,7 +5,9 @@
 //! deterministic), and every other pair must show an error. Bad input is refused with a message
 //! that names the problem. Debug build, a few seconds.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::Command;
 
 use sdem::calibration::assembly::{AssemblyCase, AssemblyOptions, Stage};
@@ -32,10 +34,8 @@ Scenario(
 )
 "#;
 
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdem_assembly_{name}_{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+fn tmp_dir(name: &str) -> common::TempDir {
+    common::temp_dir("assembly", name)
 }
 
 fn tiny(a: f64, b: f64) -> Scenario {

@@ -18,7 +18,7 @@ fn scenario() -> Scenario {
     common::small_compaction()
 }
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("ckpt", name)
 }
 

@@ -148,7 +148,7 @@ fn compaction30_phi_gain(frictionless: &str, frictional: &str) -> f64 {
         run_scenario(
             &scenario,
             &RunOptions {
-                out_dir: dir.clone(),
+                out_dir: dir.to_path_buf(),
                 ..Default::default()
             },
         )

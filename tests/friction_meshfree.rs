@@ -14,7 +14,6 @@ use sdem::run::meshfree::{Meshfree, SampleGrain, grain_model};
 use sdem::run::meshfree_checkpoint::MeshfreeCheckpoint;
 use sdem::run::{RunError, resume_run, run_scenario};
 use sdem::scenario::{MeshfreeSettings, Scenario};
-use std::path::PathBuf;
 
 mod common;
 use common::rolling::{GRAVITY, Roll, THETA, fit_s, roll, roll_with, rolling_scenario};
@@ -328,7 +327,7 @@ fn bad_friction_is_refused() {
     }
 }
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("mffriction", name)
 }
 

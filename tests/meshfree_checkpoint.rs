@@ -24,7 +24,7 @@ fn scenario() -> Scenario {
     common::meshfree_four()
 }
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("mfckpt", name)
 }
 
@@ -35,7 +35,7 @@ fn sdem() -> Command {
 }
 
 /// The uninterrupted run (on `threads` threads), with a checkpoint every [`EVERY`] steps.
-fn reference(name: &str, threads: usize) -> PathBuf {
+fn reference(name: &str, threads: usize) -> common::TempDir {
     let dir = temp_dir(name);
     let summary = with_threads(threads, || {
         run_scenario(&scenario(), &common::checkpointed(&dir, EVERY))

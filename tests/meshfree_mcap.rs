@@ -284,7 +284,7 @@ fn options(out: &Path, log: &Path) -> RunOptions {
 fn reference() -> &'static PathBuf {
     static LOG: OnceLock<PathBuf> = OnceLock::new();
     LOG.get_or_init(|| {
-        let dir = common::temp_dir("mfmcap", "ref");
+        let dir = common::temp_dir("mfmcap", "ref").keep();
         let log = dir.join("ref.mcap");
         let summary = run_scenario(&common::meshfree_four(), &options(&dir, &log)).unwrap();
         assert_eq!(summary.steps, 16);

@@ -23,7 +23,7 @@ Scenario(
 )
 "#;
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("sample-file", name)
 }
 

@@ -33,7 +33,7 @@ Scenario(
 )
 "#;
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TempDir {
     common::temp_dir("vtk", name)
 }
 

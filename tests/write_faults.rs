@@ -47,12 +47,12 @@ fn stderr(o: &Output) -> String {
 }
 
 /// A fresh folder with the scenario in it.
-fn setup(name: &str) -> (PathBuf, PathBuf) {
+fn setup(name: &str) -> (common::TempDir, PathBuf) {
     setup_with(name, SCENARIO)
 }
 
 /// A fresh folder with the scenario `text` in it.
-fn setup_with(name: &str, text: &str) -> (PathBuf, PathBuf) {
+fn setup_with(name: &str, text: &str) -> (common::TempDir, PathBuf) {
     let dir = common::temp_dir("write-faults", name);
     let scenario = dir.join("s.ron");
     std::fs::write(&scenario, text).unwrap();

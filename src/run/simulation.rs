@@ -358,11 +358,27 @@ Scenario(
 )
 "#;
 
+    /// The toy run's output folder, removed when the test is done with it.
+    struct Scratch(PathBuf);
+
+    impl std::ops::Deref for Scratch {
+        type Target = std::path::Path;
+        fn deref(&self) -> &std::path::Path {
+            &self.0
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            std::fs::remove_dir_all(&self.0).ok();
+        }
+    }
+
     fn run(
         name: &str,
         fail_at: u64,
         mcap: bool,
-    ) -> (Result<crate::run::RunSummary, RunError>, PathBuf) {
+    ) -> (Result<crate::run::RunSummary, RunError>, Scratch) {
         let scenario = Scenario::parse(SCENARIO, "toy.ron").unwrap();
         let out = std::env::temp_dir().join(format!("sdem-toy-{}-{name}", std::process::id()));
         std::fs::remove_dir_all(&out).ok();
@@ -393,7 +409,7 @@ Scenario(
             &options,
             None,
         );
-        (result, out)
+        (result, Scratch(out))
     }
 
     #[test]

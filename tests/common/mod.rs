@@ -65,12 +65,51 @@ pub fn meshfree_four() -> Scenario {
     s
 }
 
-/// A fresh, empty folder for one test: `sdem-<prefix>-<pid>-<name>` in the temp dir.
-pub fn temp_dir(prefix: &str, name: &str) -> PathBuf {
+/// A fresh, empty folder for one test: `sdem-<prefix>-<pid>-<name>` in the temp dir, removed
+/// with everything in it when the value is dropped (also when the test fails).
+pub fn temp_dir(prefix: &str, name: &str) -> TempDir {
     let dir = std::env::temp_dir().join(format!("sdem-{prefix}-{}-{name}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    TempDir(dir)
+}
+
+/// A test's scratch folder ([`temp_dir`]); reads as the folder's path.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// The folder's path, the folder kept: for a folder that several tests of one binary share
+    /// through a static, which is never dropped.
+    pub fn keep(self) -> PathBuf {
+        let path = self.0.clone();
+        std::mem::forget(self);
+        path
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
 }
 
 /// Run options writing into `out` with a checkpoint every `every` steps.
