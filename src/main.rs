@@ -649,10 +649,8 @@ fn run(cli: Cli) -> Result<()> {
             }
             if parsed.deformation.mass_scale != 1.0 {
                 println!(
-                    "deformation mass scale: M_eps and M_alpha x {} (for quasi-static runs: the \
-                     strains respond {:.3} times slower)",
-                    parsed.deformation.mass_scale,
-                    parsed.deformation.mass_scale.sqrt()
+                    "deformation mass scale: M_eps and M_alpha x {}",
+                    parsed.deformation.mass_scale
                 );
             }
             if let Some(a) = parsed.parameters().adaptive {

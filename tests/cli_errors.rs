@@ -435,6 +435,40 @@ fn deformation_mass_scale_below_one() {
 }
 
 #[test]
+fn a_deformation_mass_scale_is_checked_and_warned_about() {
+    let scratch = Scratch::new("mass_scale_warning");
+    let path = scratch.write(
+        "scenario.ron",
+        &variant(
+            "alpha_mass_scale: 1.0)",
+            "alpha_mass_scale: 1.0, mass_scale: 4.0)",
+        ),
+    );
+    let out = sdem(&[Path::new("check"), &path]);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    assert_mentions(
+        "warning",
+        &stderr,
+        &["deformation.mass_scale = 4", "2.00 times", "quasi-static"],
+    );
+    assert!(stdout.contains("M_eps and M_alpha x 4"), "{stdout}");
+    // The base scenario's time step, 0.2 of the critical estimate, grows by sqrt(5 / 2).
+    let base = scratch.write("base.ron", BASE);
+    let base_out = sdem(&[Path::new("check"), &base]);
+    let step = |text: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("time step:"))
+            .unwrap_or_else(|| panic!("{text}"));
+        line["time step:".len()..].trim().parse().unwrap()
+    };
+    let gain = step(&stdout) / step(&String::from_utf8_lossy(&base_out.stdout));
+    assert!((gain - 2.5_f64.sqrt()).abs() < 1e-3, "gain {gain}");
+}
+
+#[test]
 fn non_positive_density() {
     let scratch = Scratch::new("density");
     for (value, shown) in [("0.0", "0"), ("-2.0", "-2")] {

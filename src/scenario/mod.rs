@@ -1001,6 +1001,15 @@ impl Scenario {
         if c.damping == 0.0 {
             warnings.push("contact.damping = 0: nothing dissipates energy at contacts; a compaction will not be quasi-static".into());
         }
+        if d.mass_scale > 1.0 {
+            warnings.push(format!(
+                "deformation.mass_scale = {}: the grains' strains answer a load {:.2} times \
+                 slower than their own inertia allows; for quasi-static runs only, and p_c just \
+                 above jamming moves (about -5% at phi = 0.86 with 4; docs/speed_accuracy.md)",
+                d.mass_scale,
+                d.mass_scale.sqrt()
+            ));
+        }
         if self.loading.is_empty() {
             return Err(invalid("loading", "[]", "a list of at least one phase"));
         }
