@@ -206,33 +206,6 @@ fn multi_rate_runs_are_deterministic_and_resume_bitwise() {
 }
 
 #[test]
-fn multi_rate_runs_do_not_depend_on_the_neighbour_list_skin() {
-    // Expectation: the skin only decides when the list is rebuilt; a grain's role in a cycle
-    // is decided by gaps the list always holds, so a thin and a thick skin give the same run.
-    let mut runs = Vec::new();
-    for skin in [0.05, 0.5] {
-        let text = SMALL.replace(
-            "material: (young: 1.0, poisson: 0.5, density: 1.0),",
-            &format!(
-                "material: (young: 1.0, poisson: 0.5, density: 1.0),\n    contact: (skin: {skin}),"
-            ),
-        );
-        let scenario = Scenario::parse(&text, "skin.ron").unwrap();
-        scenario.validate().unwrap();
-        let dir = common::temp_dir("multi-rate", &format!("skin{skin}"));
-        let summary = run_scenario(&scenario, &common::checkpointed(&dir, 1_000_000_000)).unwrap();
-        runs.push((summary.neighbor_builds, dir));
-    }
-    assert!(
-        runs[0].0 > 2 * runs[1].0,
-        "builds {} and {}",
-        runs[0].0,
-        runs[1].0
-    );
-    assert_same_run(&runs[0].1, &runs[1].1);
-}
-
-#[test]
 fn multi_rate_steps_refuse_friction_and_periodic_cells() {
     let text = SMALL.replace(
         "material: (young: 1.0, poisson: 0.5, density: 1.0),",

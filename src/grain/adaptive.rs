@@ -97,20 +97,6 @@ impl AdaptiveSettings {
     /// of its contact stress divided by E.
     #[inline]
     pub fn next_level(&self, current: GrainLevel, mean: f64, deviator: f64) -> GrainLevel {
-        self.next_level_after(current, mean, deviator, 1)
-    }
-
-    /// [`next_level`](Self::next_level) after a step that counts as `steps` steps of the
-    /// deforming grains (2 for a rigid grain's step of a multi-rate cycle), so that `confirm`
-    /// and `dwell` keep their duration.
-    #[inline]
-    pub fn next_level_after(
-        &self,
-        current: GrainLevel,
-        mean: f64,
-        deviator: f64,
-        steps: u32,
-    ) -> GrainLevel {
         let wanted = if deviator > self.full_up {
             ModelLevel::Full
         } else if mean > self.volumetric_up {
@@ -121,7 +107,7 @@ impl AdaptiveSettings {
         let mut level = current.level;
         let mut pending = 0;
         if wanted > level {
-            pending = current.pending.saturating_add(steps);
+            pending = current.pending.saturating_add(1);
             if pending > self.confirm {
                 level = wanted;
             }
@@ -138,7 +124,7 @@ impl AdaptiveSettings {
         if level == current.level {
             GrainLevel {
                 level,
-                steps: current.steps.saturating_add(steps),
+                steps: current.steps.saturating_add(1),
                 pending,
             }
         } else {
@@ -237,31 +223,6 @@ mod tests {
             s.next_level(vol, 0.4, 0.0),
             GrainLevel::new(ModelLevel::Rigid)
         );
-    }
-
-    #[test]
-    fn a_step_that_counts_twice_halves_the_confirmation_and_the_dwell() {
-        // Expectation: a rigid grain of a multi-rate cycle steps twice the deforming grains'
-        // step; counting it as two keeps `confirm` and `dwell` at the same duration.
-        let s = AdaptiveSettings {
-            confirm: 10,
-            dwell: 10,
-            ..Default::default()
-        };
-        let loaded = |mut level: GrainLevel, steps: u32| {
-            let mut calls = 0;
-            while level.level == ModelLevel::Rigid {
-                level = s.next_level_after(level, 0.0, 1.0, steps);
-                calls += 1;
-            }
-            calls
-        };
-        let rigid = GrainLevel::new(ModelLevel::Rigid);
-        assert_eq!(loaded(rigid, 1), 11);
-        assert_eq!(loaded(rigid, 2), 6);
-        let full = GrainLevel::new(ModelLevel::Full);
-        let after = s.next_level_after(full, 0.0, 0.0, 2);
-        assert_eq!((after.level, after.steps), (ModelLevel::Full, 2));
     }
 
     #[test]

@@ -899,25 +899,20 @@ impl World {
     /// 1. All frames and all pairs at t; the first grain pass advances the fast grains by
     ///    `substep` and the interior ones by the whole cycle (nothing that moves in the second
     ///    half touches them), and keeps each boundary grain's load.
-    /// 2. The fast grains' frames and the pairs with a fast grain are computed again; the
-    ///    second pass advances the fast grains by `substep` and each boundary grain by the
-    ///    whole cycle under the mean of its two loads: a pair's impulse on the two sides is
-    ///    then the same, so momentum is kept exactly as in a plain step.
-    /// 3. The walls move by the whole cycle.
+    /// 2. The walls move by `substep`; the fast grains' frames and the pairs with a fast grain
+    ///    are computed again; the second pass advances the fast grains by `substep` and each
+    ///    boundary grain by the whole cycle under the mean of its two loads: a pair's impulse on
+    ///    the two sides is then the same, so momentum is kept exactly as in a plain step.
     ///
-    /// During the second half a boundary grain, and the walls, stand where they were at t; the
-    /// fast grains meet them there. The walls are slow bodies too: a run that carries the grain
-    /// centres with the box (`affine`) moves them with the walls after the step, and a wall
-    /// moved halfway would press into grains not yet carried. The cost is one plain step plus
-    /// the fast grains' share of another.
+    /// During the second half a boundary grain stands where it was at t; the fast grains see it
+    /// there. The cost is one plain step plus the fast grains' share of another.
     fn step_cycle(&mut self, substep: f64) -> Result<&StepTotals, Instability> {
         let cycle = 2.0 * substep;
         // The second half evaluates the deforming grains' pairs one substep later than the
-        // list's check: the check keeps a reserve for their motion and growth over it (twice
-        // the bound from their rates now, for the change of those rates over the substep).
-        let reserve = 2.0 * substep * self.fastest_deforming_motion();
+        // list's check: the check keeps a reserve for their motion and growth over it.
+        let reserve = substep * self.fastest_deforming_motion();
         self.prepare(reserve)?;
-        self.assign_cycle_roles(reserve);
+        self.assign_cycle_roles();
         let pairs_start = Instant::now();
         let pair_sums = self.compute_pair_contacts(false)?;
         let grains_start = Instant::now();
@@ -930,6 +925,7 @@ impl World {
         let mut contact_ends = 0;
         let mut momentum_flux = [0.0; 3];
         add_chunk_sums(&mut totals, &mut contact_ends, &mut momentum_flux, &first)?;
+        self.move_walls(substep);
         let frames_start = Instant::now();
         self.phase_times.grains += (frames_start - grains_start).as_secs_f64();
 
@@ -946,7 +942,7 @@ impl World {
         let second = self.grain_pass(GrainPass::CycleSecond, substep, &stored);
         add_chunk_sums(&mut totals, &mut contact_ends, &mut momentum_flux, &second)?;
         totals.contacts = contact_ends / 2;
-        self.move_walls(cycle);
+        self.move_walls(substep);
         self.finish_step(totals, cycle);
         self.phase_times.grains += grains_start.elapsed().as_secs_f64();
         Ok(&self.totals)
@@ -964,15 +960,10 @@ impl World {
             .reduce(|| 0.0, f64::max)
     }
 
-    /// Each grain's role in the coming multi-rate cycle (see [`World::step_cycle`]). A rigid
-    /// grain is a boundary grain when a deforming grain's bounding circle comes within
-    /// `reserve` of its own: only such a pair can touch before the cycle ends. Every such pair
-    /// is listed whenever the list was built (the list's check keeps the same reserve), so the
-    /// roles, and the run, do not depend on when it was.
-    fn assign_cycle_roles(&mut self, reserve: f64) {
+    /// Each grain's role in the coming multi-rate cycle (see [`World::step_cycle`]).
+    fn assign_cycle_roles(&mut self) {
         let levels = &self.levels;
         let neighbors = &self.neighbors;
-        let (centers, reach) = (&self.centers, &self.reach);
         let deforming = |g: usize| levels[g].level != ModelLevel::Rigid;
         self.cycle_roles
             .resize(self.grains.len(), CycleRole::Interior);
@@ -985,9 +976,7 @@ impl World {
                     CycleRole::Fast
                 } else if neighbors.pairs_of(g).any(|end| {
                     let [i, j] = neighbors.pairs[end.pair];
-                    let other = if end.second { i } else { j } as usize;
-                    let gap = centers[g].distance(centers[other]) - reach[g] - reach[other];
-                    deforming(other) && gap < reserve
+                    deforming(if end.second { i } else { j } as usize)
                 }) {
                     CycleRole::Boundary
                 } else {
@@ -1191,14 +1180,7 @@ impl World {
                         }
                         GrainAction::Skip => unreachable!("skipped above"),
                     };
-                    // A rigid grain's step of a cycle counts as two for its level's counters.
-                    let level_steps = if pass == GrainPass::Plain || roles[g] == CycleRole::Fast {
-                        1
-                    } else {
-                        2
-                    };
-                    let length = StepLength { dt, level_steps };
-                    let update = advance_grain(params, length, grain, level, &load, g, step);
+                    let update = advance_grain(params, dt, grain, level, &load, g, step);
                     *stress = update.stress;
                     if let Err(e) = update.result {
                         sums.failure.get_or_insert(e);
@@ -1399,18 +1381,10 @@ struct GrainUpdate {
     elastic_energy: f64,
 }
 
-/// How far a grain is advanced: the time step, and how many steps of the deforming grains it
-/// counts for in the adaptive level's counters (2 for a rigid grain's step of a cycle).
-#[derive(Debug, Clone, Copy)]
-struct StepLength {
-    dt: f64,
-    level_steps: u32,
-}
-
 /// Stresses, accelerations and the symplectic Euler update of one grain (SPEC §3–§6).
 fn advance_grain(
     params: &Parameters,
-    length: StepLength,
+    dt: f64,
     grain: &mut Grain,
     level: &mut GrainLevel,
     load: &ContactLoad,
@@ -1419,7 +1393,6 @@ fn advance_grain(
 ) -> GrainUpdate {
     let material = &params.material;
     let density = material.density;
-    let StepLength { dt, level_steps } = length;
     let reference_area = grain.reference_area();
     let lost_fraction = load.lost_area / reference_area;
     let current_area = grain.ellipse_area() - load.lost_area;
@@ -1515,12 +1488,9 @@ fn advance_grain(
     if let Some(adaptive) = &params.adaptive {
         let (mean, deviator) = stress_invariants(stress.external);
         let inv_young = 1.0 / material.young;
-        let next = adaptive.settings.next_level_after(
-            *level,
-            mean * inv_young,
-            deviator * inv_young,
-            level_steps,
-        );
+        let next = adaptive
+            .settings
+            .next_level(*level, mean * inv_young, deviator * inv_young);
         if next.level < level.level {
             freeze(grain, next.level);
         }

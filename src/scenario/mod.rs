@@ -974,14 +974,6 @@ impl Scenario {
                      frictionless grains in a box)",
                 ));
             }
-            if a.multi_rate {
-                warnings.push(
-                    "model.Adaptive.multi_rate = true is experimental: its p_c(phi) just above \
-                     jamming lies 8-28% from plain steps' (docs/speed_accuracy.md, \"Multi-rate \
-                     steps\")"
-                        .into(),
-                );
-            }
         }
         if !(self.gravity.0.is_finite() && self.gravity.1.is_finite()) {
             return Err(invalid(
