@@ -104,7 +104,6 @@ fn a_grain_loaded_across_the_threshold_and_back_changes_level_once_each_way() {
         full_down: down,
         confirm: 20,
         dwell: 200,
-        multi_rate: false,
     };
     let (world, trace) = oscillating_squeeze(adaptive_params(0.3, 0.5, settings));
     // The load really crosses `up` back and forth while loaded (else the test proves nothing).
@@ -159,7 +158,6 @@ fn the_time_step_follows_the_highest_level_present() {
         full_down: 1e-4,
         confirm: 20,
         dwell: 200,
-        multi_rate: false,
     };
     let p = adaptive_params(0.3, 0.5, settings);
     let m = p.material;

@@ -40,11 +40,6 @@ pub struct AdaptiveSettings {
     pub confirm: u32,
     /// Steps a grain stays at least at a level before it may step down.
     pub dwell: u32,
-    /// Multi-rate steps (frictionless grains in a box): while some grains deform, the rigid
-    /// ones take one step of twice the deforming grains' step, which take two (see
-    /// `World::step_cycle`); `false`: every grain takes the step of the highest level present.
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    pub multi_rate: bool,
 }
 
 impl Default for AdaptiveSettings {
@@ -57,7 +52,6 @@ impl Default for AdaptiveSettings {
             full_down: 2e-5,
             confirm: 200,
             dwell: 1000,
-            multi_rate: false,
         }
     }
 }
@@ -181,7 +175,6 @@ mod tests {
             full_down: 1.0,
             confirm: 0,
             dwell: 3,
-            multi_rate: false,
         };
         let rigid = GrainLevel::new(ModelLevel::Rigid);
         assert_eq!(s.next_level(rigid, 0.9, 0.0).level, ModelLevel::Rigid);

@@ -239,117 +239,13 @@ struct PairSums {
     failure: Option<Instability>,
 }
 
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Copy, Default)]
 struct ChunkSums {
     totals: StepTotals,
     /// `sum m v ⊗ v` (xx, yy, xy).
     momentum_flux: [f64; 3],
     contact_ends: u64,
     failure: Option<Instability>,
-    /// The first pass of a multi-rate cycle: the loads of the chunk's boundary grains, in grain
-    /// order.
-    stored: Vec<ContactLoad>,
-}
-
-/// Adds the sums of a grain pass's chunks, in chunk order, to a step's totals; the first
-/// failure, in chunk order, if any.
-fn add_chunk_sums(
-    totals: &mut StepTotals,
-    contact_ends: &mut u64,
-    momentum_flux: &mut [f64; 3],
-    chunks: &[ChunkSums],
-) -> Result<(), Instability> {
-    for sums in chunks {
-        if let Some(f) = sums.failure {
-            return Err(f);
-        }
-        for (sum, x) in momentum_flux.iter_mut().zip(sums.momentum_flux) {
-            *sum += x;
-        }
-        for w in 0..MAX_WALLS {
-            totals.wall_force[w] += sums.totals.wall_force[w];
-        }
-        totals.grain_area += sums.totals.grain_area;
-        totals.kinetic_energy += sums.totals.kinetic_energy;
-        totals.elastic_energy += sums.totals.elastic_energy;
-        totals.capped_contacts += sums.totals.capped_contacts;
-        totals.friction_dissipation += sums.totals.friction_dissipation;
-        totals.sliding_contacts += sums.totals.sliding_contacts;
-        for l in 0..3 {
-            totals.level_counts[l] += sums.totals.level_counts[l];
-        }
-        *contact_ends += sums.contact_ends;
-    }
-    Ok(())
-}
-
-/// A grain's part in a multi-rate cycle (see [`World::step_cycle`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-enum CycleRole {
-    /// Rigid, and no deforming grain among its candidate pairs: one step of the whole cycle,
-    /// taken in the first pass.
-    #[default]
-    Interior,
-    /// Rigid, with a deforming grain among its candidate pairs: one step of the whole cycle,
-    /// taken in the second pass under the mean of the two passes' loads.
-    Boundary,
-    /// Deforming: two steps of half the cycle.
-    Fast,
-}
-
-/// Which grain pass of a step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum GrainPass {
-    /// The only pass of a plain step.
-    Plain,
-    /// The first and second pass of a multi-rate cycle.
-    CycleFirst,
-    CycleSecond,
-}
-
-/// What a grain pass does with one grain.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum GrainAction {
-    /// Nothing (an interior grain in the second pass of a cycle).
-    Skip,
-    /// Advance by `dt`; `counted`: the grain's state enters the step's totals.
-    Advance { dt: f64, counted: bool },
-    /// Gather the load and keep it for the second pass (a boundary grain, first pass).
-    Keep,
-    /// Advance by `dt` under the mean of the kept load and this pass's.
-    AdvanceMean { dt: f64 },
-}
-
-impl GrainAction {
-    fn counted(self) -> bool {
-        matches!(
-            self,
-            GrainAction::Advance { counted: true, .. } | GrainAction::AdvanceMean { .. }
-        )
-    }
-}
-
-impl GrainPass {
-    /// What this pass does with grain `g`; `dt` is the plain step, or a cycle's substep.
-    #[inline]
-    fn action(self, g: usize, roles: &[CycleRole], dt: f64) -> GrainAction {
-        match self {
-            GrainPass::Plain => GrainAction::Advance { dt, counted: true },
-            GrainPass::CycleFirst => match roles[g] {
-                CycleRole::Fast => GrainAction::Advance { dt, counted: false },
-                CycleRole::Interior => GrainAction::Advance {
-                    dt: 2.0 * dt,
-                    counted: true,
-                },
-                CycleRole::Boundary => GrainAction::Keep,
-            },
-            GrainPass::CycleSecond => match roles[g] {
-                CycleRole::Fast => GrainAction::Advance { dt, counted: true },
-                CycleRole::Interior => GrainAction::Skip,
-                CycleRole::Boundary => GrainAction::AdvanceMean { dt: 2.0 * dt },
-            },
-        }
-    }
 }
 
 /// The frictional state of a world (SPEC §13): the spring force of each closed frictional
@@ -403,8 +299,6 @@ pub struct World {
     wall_history: Vec<[f64; MAX_WALLS]>,
     /// Where the steps' wall-clock time went (a diagnostic).
     pub phase_times: PhaseTimes,
-    /// Each grain's role in the current multi-rate cycle (empty until the first cycle).
-    cycle_roles: Vec<CycleRole>,
 }
 
 impl World {
@@ -440,7 +334,6 @@ impl World {
             friction_work: 0.0,
             wall_history: vec![[0.0; MAX_WALLS]; n],
             phase_times: PhaseTimes::default(),
-            cycle_roles: Vec::new(),
         };
         world.count_levels();
         world
@@ -469,15 +362,11 @@ impl World {
     }
 
     /// The adaptive time step: that of the highest level any grain is at.
-    /// With multi-rate steps, a cycle's length: twice the deforming grains' step.
     fn apply_adaptive_dt(&mut self) {
         if let Some(adaptive) = &self.params.adaptive {
             let counts = &self.totals.level_counts;
             let highest = (0..3).rev().find(|&k| counts[k] > 0).unwrap_or(0);
-            self.params.dt = match self.multi_rate_substep() {
-                Some(substep) => 2.0 * substep,
-                None => adaptive.dt[highest],
-            };
+            self.params.dt = adaptive.dt[highest];
         }
     }
 
@@ -562,14 +451,25 @@ impl World {
     }
 
     /// Recomputes shapes, velocity fields and the neighbour list for the current state.
-    /// Frames and the neighbour list for a step; `reserve`: motion the list must allow for
-    /// before its next check, beyond the positions now (see [`World::step_cycle`]).
-    fn prepare(&mut self, reserve: f64) -> Result<(), Instability> {
+    fn prepare(&mut self) -> Result<(), Instability> {
         let start = Instant::now();
         // A grain added after construction gets an empty row of wall history.
         self.wall_history
             .resize(self.grains.len(), [0.0; MAX_WALLS]);
         let density = self.params.material.density;
+        let frame_of = |g: &Grain, level: &GrainLevel| {
+            if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
+                return Frame::of_circle(g, density);
+            }
+            let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
+            Frame {
+                shape,
+                velocity: g.velocity,
+                velocity_gradient,
+                mass: g.mass(density),
+                circle: false,
+            }
+        };
         let n = self.grains.len();
         self.frames.resize(n, Frame::default());
         self.centers.resize(n, DVec2::ZERO);
@@ -584,7 +484,7 @@ impl World {
             .zip(self.grains.par_iter().zip(self.levels.par_iter()))
             .with_min_len(GRAIN_CHUNK)
             .for_each(|(((frame, center), reach), (g, level))| {
-                *frame = frame_of(g, level, density);
+                *frame = frame_of(g, level);
                 *center = frame.shape.center;
                 *reach = frame.shape.bounding_radius;
             });
@@ -606,9 +506,7 @@ impl World {
         }
         let rebuild = match &cell {
             Some(cell) => self.neighbors.needs_rebuild_periodic(centers, reach, cell),
-            None => self
-                .neighbors
-                .needs_rebuild_with_reserve(centers, reach, reserve),
+            None => self.neighbors.needs_rebuild(centers, reach),
         };
         if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
@@ -660,11 +558,8 @@ impl World {
         Ok(())
     }
 
-    /// Contact geometry and forces of every candidate pair, and their sums; with
-    /// `only_fast`, of the pairs with a deforming grain of the current multi-rate cycle (the
-    /// others keep their records).
-    fn compute_pair_contacts(&mut self, only_fast: bool) -> Result<PairSums, Instability> {
-        let roles = &self.cycle_roles;
+    /// Contact geometry and forces of every candidate pair, and their sums.
+    fn compute_pair_contacts(&mut self) -> Result<PairSums, Instability> {
         let params = &self.params;
         let table = &self.table;
         let frames = &self.frames;
@@ -688,12 +583,6 @@ impl World {
                     for (k, slot) in out.iter_mut().enumerate() {
                         let p = first_pair + k;
                         let [i, j] = pairs[p];
-                        if only_fast
-                            && roles[i as usize] != CycleRole::Fast
-                            && roles[j as usize] != CycleRole::Fast
-                        {
-                            continue;
-                        }
                         let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
                         // The centre of the second grain, or of its image that meets the first.
                         let mut center_j = fj.shape.center;
@@ -830,206 +719,14 @@ impl World {
         Ok(totals)
     }
 
-    /// Advances the world by one time step: with multi-rate steps on and some grains deforming,
-    /// one cycle ([`World::step_cycle`]).
+    /// Advances the world by one time step.
     pub fn step(&mut self) -> Result<&StepTotals, Instability> {
-        if let Some(substep) = self.multi_rate_substep() {
-            return self.step_cycle(substep);
-        }
-        self.prepare(0.0)?;
+        self.prepare()?;
         let pairs_start = Instant::now();
-        let pair_sums = self.compute_pair_contacts(false)?;
+        let pair_sums = self.compute_pair_contacts()?;
         let grains_start = Instant::now();
         self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
-        let dt = self.params.dt;
-        let chunk_sums = self.grain_pass(GrainPass::Plain, dt, &[]);
-        let mut totals = StepTotals {
-            capped_contacts: pair_sums.capped,
-            friction_dissipation: pair_sums.dissipation,
-            sliding_contacts: pair_sums.sliding,
-            ..Default::default()
-        };
-        let mut contact_ends = 0;
-        let mut momentum_flux = [0.0; 3];
-        add_chunk_sums(
-            &mut totals,
-            &mut contact_ends,
-            &mut momentum_flux,
-            &chunk_sums,
-        )?;
-        totals.contacts = contact_ends / 2;
-        match self.periodic.as_mut() {
-            Some(periodic) => {
-                let area_before = periodic.cell(&self.walls).area();
-                let motion = periodic.advance(&mut self.walls, dt);
-                let area = motion.current.area();
-                totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
-                totals.kinetic_stress = momentum_flux.map(|m| -m / area);
-                self.follow_cell(&motion);
-            }
-            None => self.move_walls(dt),
-        }
-        self.finish_step(totals, dt);
-        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
-        Ok(&self.totals)
-    }
 
-    /// The deforming grains' step when the next step is a multi-rate cycle: multi-rate steps on,
-    /// frictionless grains in a box, some grain deforming, and two of its steps no longer than
-    /// the rigid grains' step.
-    fn multi_rate_substep(&self) -> Option<f64> {
-        let adaptive = self.params.adaptive.as_ref()?;
-        if !adaptive.settings.multi_rate
-            || self.params.friction.is_some()
-            || self.periodic.is_some()
-        {
-            return None;
-        }
-        let counts = &self.totals.level_counts;
-        let highest = (1..3).rev().find(|&k| counts[k] > 0)?;
-        let substep = adaptive.dt[highest];
-        (2.0 * substep <= adaptive.dt[ModelLevel::Rigid.index()]).then_some(substep)
-    }
-
-    /// One multi-rate cycle of length `2 substep` (the world's `params.dt`).
-    ///
-    /// The deforming grains ("fast") take two steps of `substep`, the rigid ones one of
-    /// `2 substep`. Roles are fixed at the start of the cycle: a rigid grain with a fast grain
-    /// among its candidate pairs is a "boundary" grain, the others "interior".
-    /// 1. All frames and all pairs at t; the first grain pass advances the fast grains by
-    ///    `substep` and the interior ones by the whole cycle (nothing that moves in the second
-    ///    half touches them), and keeps each boundary grain's load.
-    /// 2. The walls move by `substep`; the fast grains' frames and the pairs with a fast grain
-    ///    are computed again; the second pass advances the fast grains by `substep` and each
-    ///    boundary grain by the whole cycle under the mean of its two loads: a pair's impulse on
-    ///    the two sides is then the same, so momentum is kept exactly as in a plain step.
-    ///
-    /// During the second half a boundary grain stands where it was at t; the fast grains see it
-    /// there. The cost is one plain step plus the fast grains' share of another.
-    fn step_cycle(&mut self, substep: f64) -> Result<&StepTotals, Instability> {
-        let cycle = 2.0 * substep;
-        // The second half evaluates the deforming grains' pairs one substep later than the
-        // list's check: the check keeps a reserve for their motion and growth over it.
-        let reserve = substep * self.fastest_deforming_motion();
-        self.prepare(reserve)?;
-        self.assign_cycle_roles();
-        let pairs_start = Instant::now();
-        let pair_sums = self.compute_pair_contacts(false)?;
-        let grains_start = Instant::now();
-        self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
-        let mut first = self.grain_pass(GrainPass::CycleFirst, substep, &[]);
-        let mut totals = StepTotals {
-            capped_contacts: pair_sums.capped,
-            ..Default::default()
-        };
-        let mut contact_ends = 0;
-        let mut momentum_flux = [0.0; 3];
-        add_chunk_sums(&mut totals, &mut contact_ends, &mut momentum_flux, &first)?;
-        self.move_walls(substep);
-        let frames_start = Instant::now();
-        self.phase_times.grains += (frames_start - grains_start).as_secs_f64();
-
-        self.refresh_fast_frames();
-        let pairs_start = Instant::now();
-        self.phase_times.frames += (pairs_start - frames_start).as_secs_f64();
-        self.compute_pair_contacts(true)?;
-        let grains_start = Instant::now();
-        self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
-        let stored: Vec<Vec<ContactLoad>> = first
-            .iter_mut()
-            .map(|sums| std::mem::take(&mut sums.stored))
-            .collect();
-        let second = self.grain_pass(GrainPass::CycleSecond, substep, &stored);
-        add_chunk_sums(&mut totals, &mut contact_ends, &mut momentum_flux, &second)?;
-        totals.contacts = contact_ends / 2;
-        self.move_walls(substep);
-        self.finish_step(totals, cycle);
-        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
-        Ok(&self.totals)
-    }
-
-    /// The largest speed of a deforming grain's centre plus the rate of growth of its reach
-    /// (R times its largest strain rate): a bound on how fast it closes a gap.
-    fn fastest_deforming_motion(&self) -> f64 {
-        self.grains
-            .par_iter()
-            .zip(self.levels.par_iter())
-            .with_min_len(GRAIN_CHUNK)
-            .filter(|(_, level)| level.level != ModelLevel::Rigid)
-            .map(|(g, _)| g.velocity.length() + g.radius * g.eps1_rate.abs().max(g.eps2_rate.abs()))
-            .reduce(|| 0.0, f64::max)
-    }
-
-    /// Each grain's role in the coming multi-rate cycle (see [`World::step_cycle`]).
-    fn assign_cycle_roles(&mut self) {
-        let levels = &self.levels;
-        let neighbors = &self.neighbors;
-        let deforming = |g: usize| levels[g].level != ModelLevel::Rigid;
-        self.cycle_roles
-            .resize(self.grains.len(), CycleRole::Interior);
-        self.cycle_roles
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(GRAIN_CHUNK)
-            .for_each(|(g, role)| {
-                *role = if deforming(g) {
-                    CycleRole::Fast
-                } else if neighbors.pairs_of(g).any(|end| {
-                    let [i, j] = neighbors.pairs[end.pair];
-                    deforming(if end.second { i } else { j } as usize)
-                }) {
-                    CycleRole::Boundary
-                } else {
-                    CycleRole::Interior
-                };
-            });
-    }
-
-    /// The frames of the grains that deform in this cycle, at their positions after the first
-    /// half (the others have not moved, or are not met in the second half).
-    fn refresh_fast_frames(&mut self) {
-        let density = self.params.material.density;
-        let roles = &self.cycle_roles;
-        self.frames
-            .par_iter_mut()
-            .zip(self.grains.par_iter().zip(self.levels.par_iter()))
-            .enumerate()
-            .with_min_len(GRAIN_CHUNK)
-            .for_each(|(g, (frame, (grain, level)))| {
-                if roles[g] == CycleRole::Fast {
-                    *frame = frame_of(grain, level, density);
-                }
-            });
-    }
-
-    fn move_walls(&mut self, dt: f64) {
-        for wall in &mut self.walls {
-            wall.point += wall.velocity * dt;
-        }
-    }
-
-    /// Time, step count, friction work and totals after a step of `dt`, and the next step.
-    fn finish_step(&mut self, totals: StepTotals, dt: f64) {
-        self.time += dt;
-        self.step += 1;
-        if self.params.friction.is_some() {
-            self.friction_work += totals.friction_dissipation;
-        }
-        self.totals = totals;
-        // The next step's time step, from the levels the grains chose (a fixed-order sum).
-        self.apply_adaptive_dt();
-    }
-
-    /// One pass over the grains: each gathers its contacts' loads, meets the walls and is
-    /// advanced as `pass` says (the whole step of `dt` in a plain step; see
-    /// [`World::step_cycle`] for the two passes of a cycle, `dt` then being the substep and
-    /// `stored` the boundary grains' loads of the first pass, chunk by chunk).
-    fn grain_pass(
-        &mut self,
-        pass: GrainPass,
-        dt: f64,
-        stored: &[Vec<ContactLoad>],
-    ) -> Vec<ChunkSums> {
         let params = &self.params;
         let table = &self.table;
         let frames = &self.frames;
@@ -1038,9 +735,9 @@ impl World {
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
         let pair_contacts = &self.pair_contacts;
-        let roles = &self.cycle_roles;
         let step = self.step;
-        self.grains
+        let chunk_sums: Vec<ChunkSums> = self
+            .grains
             .par_chunks_mut(GRAIN_CHUNK)
             .zip(self.grain_stress.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.levels.par_chunks_mut(GRAIN_CHUNK))
@@ -1048,7 +745,6 @@ impl World {
             .enumerate()
             .map(|(chunk, (((grains, stresses), levels), wall_histories))| {
                 let mut sums = ChunkSums::default();
-                let mut first_loads = stored.get(chunk).map(|loads| loads.iter());
                 for (k, (((grain, stress), level), wall_history)) in grains
                     .iter_mut()
                     .zip(stresses.iter_mut())
@@ -1057,13 +753,6 @@ impl World {
                     .enumerate()
                 {
                     let g = chunk * GRAIN_CHUNK + k;
-                    let action = pass.action(g, roles, dt);
-                    if action == GrainAction::Skip {
-                        continue;
-                    }
-                    // Whether this pass's work on the grain enters the step's totals: the
-                    // last time the grain is advanced in the step.
-                    let counted = action.counted();
                     let frame = &frames[g];
                     let mut load = ContactLoad::default();
                     for end in neighbors.pairs_of(g) {
@@ -1154,41 +843,19 @@ impl World {
                                         }
                                         load.add(force, c.point - frame.shape.center, c.cap_area_i);
                                         load.wall_contacts += 1;
-                                        if counted {
-                                            sums.totals.wall_force[w] +=
-                                                normal_force.dot(wall.normal);
-                                            sums.totals.capped_contacts += response.capped as u64;
-                                        }
+                                        sums.totals.wall_force[w] += normal_force.dot(wall.normal);
+                                        sums.totals.capped_contacts += response.capped as u64;
                                     }
                                 }
                             }
                         }
                     }
-                    let dt = match action {
-                        GrainAction::Keep => {
-                            sums.stored.push(load);
-                            continue;
-                        }
-                        GrainAction::Advance { dt, .. } => dt,
-                        GrainAction::AdvanceMean { dt } => {
-                            let first = first_loads
-                                .as_mut()
-                                .and_then(|loads| loads.next())
-                                .expect("a boundary grain's load kept by the first pass");
-                            load = first.mean(&load);
-                            dt
-                        }
-                        GrainAction::Skip => unreachable!("skipped above"),
-                    };
-                    let update = advance_grain(params, dt, grain, level, &load, g, step);
+                    let update = advance_grain(params, grain, level, &load, g, step);
+                    sums.totals.level_counts[level.level.index()] += 1;
                     *stress = update.stress;
                     if let Err(e) = update.result {
                         sums.failure.get_or_insert(e);
                     }
-                    if !counted {
-                        continue;
-                    }
-                    sums.totals.level_counts[level.level.index()] += 1;
                     sums.totals.grain_area += update.area;
                     sums.totals.kinetic_energy += grain
                         .kinetic_energy(params.material.density, params.deformation_mass_scale);
@@ -1204,7 +871,64 @@ impl World {
                 }
                 sums
             })
-            .collect()
+            .collect();
+
+        let mut totals = StepTotals {
+            capped_contacts: pair_sums.capped,
+            friction_dissipation: pair_sums.dissipation,
+            sliding_contacts: pair_sums.sliding,
+            ..Default::default()
+        };
+        let mut contact_ends = 0;
+        let mut momentum_flux = [0.0; 3];
+        for sums in &chunk_sums {
+            if let Some(f) = sums.failure {
+                return Err(f);
+            }
+            for (sum, x) in momentum_flux.iter_mut().zip(sums.momentum_flux) {
+                *sum += x;
+            }
+            for w in 0..MAX_WALLS {
+                totals.wall_force[w] += sums.totals.wall_force[w];
+            }
+            totals.grain_area += sums.totals.grain_area;
+            totals.kinetic_energy += sums.totals.kinetic_energy;
+            totals.elastic_energy += sums.totals.elastic_energy;
+            totals.capped_contacts += sums.totals.capped_contacts;
+            totals.friction_dissipation += sums.totals.friction_dissipation;
+            totals.sliding_contacts += sums.totals.sliding_contacts;
+            for l in 0..3 {
+                totals.level_counts[l] += sums.totals.level_counts[l];
+            }
+            contact_ends += sums.contact_ends;
+        }
+        totals.contacts = contact_ends / 2;
+        let dt = self.params.dt;
+        match self.periodic.as_mut() {
+            Some(periodic) => {
+                let area_before = periodic.cell(&self.walls).area();
+                let motion = periodic.advance(&mut self.walls, dt);
+                let area = motion.current.area();
+                totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
+                totals.kinetic_stress = momentum_flux.map(|m| -m / area);
+                self.follow_cell(&motion);
+            }
+            None => {
+                for wall in &mut self.walls {
+                    wall.point += wall.velocity * dt;
+                }
+            }
+        }
+        self.time += dt;
+        self.step += 1;
+        if self.params.friction.is_some() {
+            self.friction_work += totals.friction_dissipation;
+        }
+        self.totals = totals;
+        // The next step's time step, from the levels the grains chose (a fixed-order sum).
+        self.apply_adaptive_dt();
+        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
+        Ok(&self.totals)
     }
 
     /// Carries the grain centres with the cell's affine deformation over the step, wraps them
@@ -1309,22 +1033,6 @@ fn pair_chunks_by_first_grain<'a>(
     chunks
 }
 
-/// What a grain's neighbours need from it this step: a rigid grain whose strains are equal is
-/// a circle.
-fn frame_of(g: &Grain, level: &GrainLevel, density: f64) -> Frame {
-    if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
-        return Frame::of_circle(g, density);
-    }
-    let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
-    Frame {
-        shape,
-        velocity: g.velocity,
-        velocity_gradient,
-        mass: g.mass(density),
-        circle: false,
-    }
-}
-
 /// The sums a grain needs from its contacts.
 #[derive(Debug, Clone, Copy)]
 struct ContactLoad {
@@ -1352,19 +1060,6 @@ impl Default for ContactLoad {
 }
 
 impl ContactLoad {
-    /// The mean of two loads on one grain (the two halves of a multi-rate cycle); the counts
-    /// are `later`'s.
-    fn mean(&self, later: &ContactLoad) -> ContactLoad {
-        ContactLoad {
-            force: 0.5 * (self.force + later.force),
-            torque: 0.5 * (self.torque + later.torque),
-            moment: (self.moment + later.moment) * 0.5,
-            lost_area: 0.5 * (self.lost_area + later.lost_area),
-            contacts: later.contacts,
-            wall_contacts: later.wall_contacts,
-        }
-    }
-
     #[inline]
     fn add(&mut self, force: DVec2, arm: DVec2, cap_area: f64) {
         self.force += force;
@@ -1384,7 +1079,6 @@ struct GrainUpdate {
 /// Stresses, accelerations and the symplectic Euler update of one grain (SPEC §3–§6).
 fn advance_grain(
     params: &Parameters,
-    dt: f64,
     grain: &mut Grain,
     level: &mut GrainLevel,
     load: &ContactLoad,
@@ -1393,6 +1087,7 @@ fn advance_grain(
 ) -> GrainUpdate {
     let material = &params.material;
     let density = material.density;
+    let dt = params.dt;
     let reference_area = grain.reference_area();
     let lost_fraction = load.lost_area / reference_area;
     let current_area = grain.ellipse_area() - load.lost_area;

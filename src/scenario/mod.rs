@@ -386,9 +386,6 @@ pub enum Model {
         confirm: u32,
         #[serde(default = "adaptive_default::dwell")]
         dwell: u32,
-        /// [`AdaptiveSettings::multi_rate`]; written only when on.
-        #[serde(default, skip_serializing_if = "adaptive_default::is_false")]
-        multi_rate: bool,
     },
 }
 
@@ -412,9 +409,6 @@ mod adaptive_default {
     pub fn dwell() -> u32 {
         AdaptiveSettings::default().dwell
     }
-    pub fn is_false(value: &bool) -> bool {
-        !*value
-    }
 }
 
 impl Model {
@@ -427,7 +421,6 @@ impl Model {
             full_down: s.full_down,
             confirm: s.confirm,
             dwell: s.dwell,
-            multi_rate: s.multi_rate,
         }
     }
 
@@ -441,7 +434,6 @@ impl Model {
                 full_down,
                 confirm,
                 dwell,
-                multi_rate,
             } => Some(AdaptiveSettings {
                 volumetric_up,
                 volumetric_down,
@@ -449,7 +441,6 @@ impl Model {
                 full_down,
                 confirm,
                 dwell,
-                multi_rate,
             }),
             _ => None,
         }
@@ -966,14 +957,6 @@ impl Scenario {
             a.check().map_err(|(field, value, allowed)| {
                 invalid(&format!("model.Adaptive.{field}"), num(value), allowed)
             })?;
-            if a.multi_rate && (!self.boundary.is_walls() || self.tangential_ratio() > 0.0) {
-                return Err(invalid(
-                    "model.Adaptive.multi_rate",
-                    "true",
-                    "false with friction or a periodic cell (multi-rate steps are for \
-                     frictionless grains in a box)",
-                ));
-            }
         }
         if !(self.gravity.0.is_finite() && self.gravity.1.is_finite()) {
             return Err(invalid(
