@@ -121,12 +121,13 @@ impl Adaptive {
         material: &Material,
         law: &SecantLaw,
         min_radius: f64,
-        modes: ModeSettings,
+        mode_settings: ModeSettings,
     ) -> Self {
         Self {
             settings,
             dt: ModelLevel::ALL.map(|level| {
-                fraction * frictional_critical_time_step(material, law, min_radius, level, modes)
+                fraction
+                    * frictional_critical_time_step(material, law, min_radius, level, mode_settings)
             }),
         }
     }
@@ -181,26 +182,27 @@ pub fn stiffest_modes(
     law: &SecantLaw,
     radius: f64,
     level: ModelLevel,
-    modes: ModeSettings,
+    settings: ModeSettings,
 ) -> StiffestModes {
     let mass = material.density * std::f64::consts::PI * radius * radius;
     // Response of the strain DoF to a contact force, relative to the translational one.
     let strain_coupling = if level == ModelLevel::Rigid {
         0.0
     } else {
-        4.0 / modes.deformation_mass_scale
+        4.0 / settings.deformation_mass_scale
     };
     let coupling = 1.0 + strain_coupling;
     let contact = (4.0 * law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
     let tangential_coupling = 3.0 + strain_coupling;
-    let tangential = (4.0 * modes.tangential_ratio * law.initial_stiffness() * 2.0 / mass
+    let tangential = (4.0 * settings.tangential_ratio * law.initial_stiffness() * 2.0 / mass
         * tangential_coupling)
         .sqrt();
     let deformation = if level == ModelLevel::Rigid {
         0.0
     } else {
         2.0 / radius
-            * (material.deformation_stiffness() / (material.density * modes.deformation_mass_scale))
+            * (material.deformation_stiffness()
+                / (material.density * settings.deformation_mass_scale))
                 .sqrt()
     };
     StiffestModes {
