@@ -1,6 +1,6 @@
 //! The `sdem` command line (SPEC §12).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::{Parser, Subcommand};
 use sdem::output::lock::OutputLock;
 use sdem::output::mcap::{McapSettings, Trajectory};
@@ -110,6 +110,13 @@ enum Command {
         /// volumetric strain, or the full SDEM grain.
         #[arg(long, value_enum, default_value_t = BenchModel::Full)]
         model: BenchModel,
+        /// Time the steps of a run's own state instead of the dense packing: the world of an
+        /// SDEM checkpoint (`sdem run ... --checkpoint-every`), stepped with the walls at their
+        /// checkpointed velocities (the loading program's rate control and affine carry are
+        /// left out). --grains, --resolution, --friction and --model do not apply.
+        #[arg(long, value_name = "CHECKPOINT",
+              conflicts_with_all = ["grains", "resolution", "friction", "model"])]
+        from: Option<PathBuf>,
     },
     /// Fit the secant contact law (a, b) to single-grain meshfree compressions (SPEC §10):
     /// writes DIR/calibration.csv, DIR/calibration_svk.csv and DIR/calibration.svg. With
@@ -455,6 +462,7 @@ fn run(cli: Cli) -> Result<()> {
             resolution,
             friction,
             model,
+            from,
         } => {
             if grains < 4 || steps == 0 {
                 bail!("--grains must be at least 4 and --steps at least 1");
@@ -462,23 +470,47 @@ fn run(cli: Cli) -> Result<()> {
             if !(friction.is_finite() && friction >= 0.0) {
                 bail!("--friction {friction}: a friction coefficient is a finite number >= 0");
             }
+            let from_checkpoint = match &from {
+                Some(path) => match AnyCheckpoint::read(path)? {
+                    AnyCheckpoint::Sdem(c) => Some(
+                        sdem::run::world_from_checkpoint(&c)
+                            .map_err(|e| anyhow!("{}: {e}", path.display()))?,
+                    ),
+                    AnyCheckpoint::Meshfree(_) => bail!(
+                        "{}: a meshfree run's checkpoint; sdem bench times the SDEM step only",
+                        path.display()
+                    ),
+                },
+                None => None,
+            };
             let pool = thread_pool(threads)?;
+            let scene = match &from {
+                Some(path) => format!("checkpoint: {}", path.display()),
+                None => format!("model: {:?}", model.level()),
+            };
             let result = pool.install(|| {
-                let mut world = sdem::run::bench::dense_packing(grains, resolution);
-                sdem::run::bench::with_model(&mut world, model.level());
-                if friction > 0.0 {
-                    sdem::run::bench::with_friction(&mut world, friction);
-                }
+                let mut world = match from_checkpoint {
+                    Some(world) => world,
+                    None => {
+                        let mut world = sdem::run::bench::dense_packing(grains, resolution);
+                        sdem::run::bench::with_model(&mut world, model.level());
+                        if friction > 0.0 {
+                            sdem::run::bench::with_friction(&mut world, friction);
+                        }
+                        world
+                    }
+                };
                 sdem::run::bench::run_bench(&mut world, 20, steps)
             })?;
             println!(
-                "model: {:?}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
-                model.level(),
+                "{}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  candidate pairs per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
+                scene,
                 result.grains,
                 result.steps,
                 pool.current_num_threads(),
                 result.phi,
                 2.0 * result.contacts as f64 / result.grains as f64,
+                result.candidate_pairs as f64 / result.grains as f64,
                 result.neighbor_builds,
                 result.seconds
             );

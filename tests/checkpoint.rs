@@ -634,3 +634,72 @@ fn scenario_checkpoint_interval_and_its_override() {
     assert_same_run(&base.join("scenario"), &base.join("seconds"));
     std::fs::remove_dir_all(&base).ok();
 }
+
+/// `sdem bench --from CHECKPOINT` times a run's own state. Expectation: the world it steps is
+/// the checkpointed one (every grain bit, the walls, time and step), and the command times
+/// that world rather than the dense packing, refusing the packing's options beside it.
+#[test]
+fn bench_from_a_checkpoint_steps_the_checkpointed_world() {
+    let scenario = scenario();
+    let dir = temp_dir("bench-from");
+    let mut opts = options(&dir, 0);
+    opts.stop_after_step = Some(300);
+    assert!(
+        run_scenario(&scenario, &opts).is_err(),
+        "stopped runs end in an error"
+    );
+    let path = dir.join("checkpoint.bin");
+    let saved = Checkpoint::read(&path).unwrap();
+    assert_eq!(saved.step, 300);
+
+    let world = sdem::run::world_from_checkpoint(&saved).unwrap();
+    assert_eq!(world.step, saved.step);
+    assert_eq!(world.time.to_bits(), saved.time.to_bits());
+    assert_eq!(grain_bits(&world.grains), grain_bits(&saved.grains));
+    let wall_points = |walls: &[sdem::boundary::walls::Wall]| -> Vec<[u64; 2]> {
+        walls
+            .iter()
+            .map(|w| w.point.to_array().map(f64::to_bits))
+            .collect()
+    };
+    assert_eq!(wall_points(&world.walls), wall_points(&saved.walls));
+
+    let out = sdem()
+        .args(["bench", "--steps", "3", "--threads", "1", "--from"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("checkpoint:"), "{stdout}");
+    let grains = format!("grains: {}", saved.grains.len());
+    assert!(stdout.contains(&grains), "{stdout}");
+    assert!(stdout.contains("grain-steps/s:"), "{stdout}");
+
+    // The dense packing's options do not apply to a checkpoint's world.
+    let out = sdem()
+        .args(["bench", "--grains", "400", "--from"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--grains") && stderr.contains("--from"),
+        "{stderr}"
+    );
+    // A missing file is named.
+    let missing = dir.join("no_such_checkpoint.bin");
+    let out = sdem()
+        .args(["bench", "--from"])
+        .arg(&missing)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("no_such_checkpoint.bin"), "{stderr}");
+}

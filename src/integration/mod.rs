@@ -735,6 +735,10 @@ impl World {
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
         let pair_contacts = &self.pair_contacts;
+        let wall_friction = params
+            .friction
+            .as_ref()
+            .map_or([0.0; MAX_WALLS], |f| f.walls);
         let step = self.step;
         let chunk_sums: Vec<ChunkSums> = self
             .grains
@@ -778,8 +782,14 @@ impl World {
                         load.contacts += 1;
                     }
                     for (w, wall) in walls.iter().enumerate() {
-                        // A contact that is open this step drops its history.
-                        let history = std::mem::take(&mut wall_history[w]);
+                        // A contact that is open this step drops its history. A wall without
+                        // friction never has one: its row is left untouched, not rewritten
+                        // with zeros every step.
+                        let history = if wall_friction[w] > 0.0 {
+                            std::mem::take(&mut wall_history[w])
+                        } else {
+                            0.0
+                        };
                         // Most grains are far from every wall: skip the call.
                         if wall.height(frame.shape.center) >= frame.shape.bounding_radius {
                             continue;

@@ -25,6 +25,8 @@ pub struct BenchResult {
     pub steps: u64,
     pub seconds: f64,
     pub contacts: u64,
+    /// Candidate pairs of the neighbour list after the last step.
+    pub candidate_pairs: usize,
     pub phi: f64,
     /// Neighbour-list builds during the timed steps.
     pub neighbor_builds: u64,
@@ -122,6 +124,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         steps,
         seconds,
         contacts: world.totals.contacts,
+        candidate_pairs: world.neighbors.pairs.len(),
         phi: world.totals.grain_area / (width * height),
         neighbor_builds: world.neighbors.builds - builds_before,
         phases: PhaseTimes {

@@ -355,6 +355,27 @@ pub(crate) fn macro_to_continue(out: &Path, checkpoint_path: &Path) -> Result<Pa
     Ok(macro_path)
 }
 
+/// The world of an SDEM checkpoint as it stood after its last step: grains, walls or cell,
+/// time, step, totals, model levels and contact history (the loading program and the run
+/// loop's state stay in the checkpoint). Errs when the contact history is inconsistent.
+pub fn world_from_checkpoint(c: &Checkpoint) -> Result<World, String> {
+    let scenario = &c.scenario;
+    let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
+    // A checkpoint has the cell state exactly when its scenario has a periodic cell.
+    world.periodic = c.periodic;
+    world.time = c.time;
+    world.step = c.step;
+    world.totals = StepTotals {
+        level_counts: world.totals.level_counts,
+        ..c.totals
+    };
+    if scenario.model.adaptive().is_some() {
+        world.set_levels(&c.runner.levels);
+    }
+    world.restore_contact_history(&c.contact_history)?;
+    Ok(world)
+}
+
 fn resume_sdem(
     checkpoint: &Checkpoint,
     checkpoint_path: &Path,
@@ -392,20 +413,7 @@ fn resume_sdem(
             c.runner.macro_rows
         ))
     })?;
-    let mut world = World::new(scenario.parameters(), c.grains.clone(), c.walls.clone());
-    // A checkpoint has the cell state exactly when its scenario has a periodic cell.
-    world.periodic = c.periodic;
-    world.time = c.time;
-    world.step = c.step;
-    world.totals = StepTotals {
-        level_counts: world.totals.level_counts,
-        ..c.totals
-    };
-    if scenario.model.adaptive().is_some() {
-        world.set_levels(&c.runner.levels);
-    }
-    world
-        .restore_contact_history(&c.contact_history)
+    let world = world_from_checkpoint(c)
         .map_err(|e| RunError::Resume(format!("{}: {e}", checkpoint_path.display())))?;
     let sim = Sdem::new(world, scenario, c.runner.last_good.clone());
     run_loop(
