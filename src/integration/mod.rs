@@ -52,48 +52,103 @@ pub const PAIR_CHUNK: usize = 512;
 pub const MAX_WALLS: usize = 8;
 
 /// What a grain's neighbours need from it during one step.
+///
+/// Two cache lines, aligned: the first holds all that a circle's contacts read (centre, radius,
+/// mass, velocity, spin), so that the passes load one line per circle where they loaded three
+/// from the 152 bytes this was (issue #16: those loads were the run's largest cost). A circle's
+/// frame writes only that line; the second, the shape map and velocity gradient of a grain that
+/// is not a circle, is rebuilt from the radius and spin when a circle needs it.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(64))]
 pub struct Frame {
-    pub shape: GrainShape,
-    pub velocity: DVec2,
-    /// Velocity gradient of the grain's affine motion (see [`Grain::velocity_gradient`]).
-    pub velocity_gradient: DMat2,
+    pub center: DVec2,
+    /// Radius of a circle about the centre that contains the whole contour (see
+    /// [`GrainShape::bounding_radius`]); a circle's radius.
+    pub bounding_radius: f64,
     pub mass: f64,
-    /// The grain is an exact circle of radius `shape.bounding_radius` (a grain at the rigid
-    /// level whose strains are equal: a disc, or one held at a volumetric strain). Its contacts
-    /// with walls and with other such grains take the closed forms of
+    pub velocity: DVec2,
+    /// Spin omega (read for circles only: their velocity gradient is `omega J`).
+    pub omega: f64,
+    /// The grain is an exact circle of radius `bounding_radius` (a grain at the rigid level
+    /// whose strains are equal: a disc, or one held at a volumetric strain). Its contacts with
+    /// walls and with other such grains take the closed forms of
     /// [`circle`](crate::geometry::circle) instead of the contour polygon (issue #16).
     pub circle: bool,
+    /// `A R` (see [`GrainShape::map`]); not written for a circle.
+    map: DMat2,
+    /// Velocity gradient of the grain's affine motion (see [`Grain::velocity_gradient`]); not
+    /// written for a circle.
+    velocity_gradient: DMat2,
 }
 
 impl Frame {
-    /// The frame of a rigid grain whose strains are equal: a circle of radius `R (1 + eps)`.
-    ///
-    /// Its contour polygon, needed only where it meets a grain that is not a circle, is laid
-    /// unrotated (node k at the angle `k dbeta` whatever theta): an inscribed polygon of a circle
-    /// has no material orientation to follow, and so the frame needs no sine or cosine. Its
-    /// velocity field is the rigid rotation `omega J` (a rigid grain's strain rates are zero).
+    /// The frame of a grain at its current state.
     #[inline]
-    pub fn of_circle(grain: &Grain, density: f64) -> Self {
-        let radius = grain.radius * (1.0 + grain.eps1);
+    pub fn of_grain(grain: &Grain, density: f64) -> Self {
+        let (shape, velocity_gradient) = grain.shape_and_velocity_gradient();
         Frame {
-            shape: GrainShape {
-                center: grain.center,
+            center: shape.center,
+            bounding_radius: shape.bounding_radius,
+            mass: grain.mass(density),
+            velocity: grain.velocity,
+            omega: grain.omega,
+            circle: false,
+            map: shape.map,
+            velocity_gradient,
+        }
+    }
+
+    /// The frame of a rigid grain whose strains are equal: a circle of radius `R (1 + eps)`.
+    /// Only the first line is written (see [`Frame`]).
+    #[inline]
+    pub fn write_circle(&mut self, grain: &Grain, density: f64) {
+        self.center = grain.center;
+        self.bounding_radius = grain.radius * (1.0 + grain.eps1);
+        self.mass = grain.mass(density);
+        self.velocity = grain.velocity;
+        self.omega = grain.omega;
+        self.circle = true;
+    }
+
+    /// The contour polygon's shape. A circle's polygon, needed only where it meets a grain
+    /// that is not a circle, is laid unrotated (node k at the angle `k dbeta` whatever theta):
+    /// an inscribed polygon of a circle has no material orientation to follow, and so the
+    /// frame needs no sine or cosine.
+    #[inline]
+    pub fn shape(&self) -> GrainShape {
+        if self.circle {
+            let radius = self.bounding_radius;
+            GrainShape {
+                center: self.center,
                 map: DMat2::from_diagonal(DVec2::splat(radius)),
                 inv_map: DMat2::from_diagonal(DVec2::splat(1.0 / radius)),
                 bounding_radius: radius,
-            },
-            velocity: grain.velocity,
-            velocity_gradient: QUARTER_TURN * grain.omega,
-            mass: grain.mass(density),
-            circle: true,
+            }
+        } else {
+            GrainShape {
+                center: self.center,
+                map: self.map,
+                inv_map: self.map.inverse(),
+                bounding_radius: self.bounding_radius,
+            }
+        }
+    }
+
+    /// Velocity gradient of the grain's affine motion: for a circle the rigid rotation
+    /// `omega J` (a rigid grain's strain rates are zero).
+    #[inline]
+    pub fn velocity_gradient(&self) -> DMat2 {
+        if self.circle {
+            QUARTER_TURN * self.omega
+        } else {
+            self.velocity_gradient
         }
     }
 
     /// Velocity of the material point of this grain at x.
     #[inline]
     pub fn velocity_at(&self, x: DVec2) -> DVec2 {
-        self.velocity + self.velocity_gradient * (x - self.shape.center)
+        self.velocity + self.velocity_gradient() * (x - self.center)
     }
 }
 
@@ -457,19 +512,6 @@ impl World {
         self.wall_history
             .resize(self.grains.len(), [0.0; MAX_WALLS]);
         let density = self.params.material.density;
-        let frame_of = |g: &Grain, level: &GrainLevel| {
-            if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
-                return Frame::of_circle(g, density);
-            }
-            let (shape, velocity_gradient) = g.shape_and_velocity_gradient();
-            Frame {
-                shape,
-                velocity: g.velocity,
-                velocity_gradient,
-                mass: g.mass(density),
-                circle: false,
-            }
-        };
         let n = self.grains.len();
         self.frames.resize(n, Frame::default());
         self.centers.resize(n, DVec2::ZERO);
@@ -484,9 +526,13 @@ impl World {
             .zip(self.grains.par_iter().zip(self.levels.par_iter()))
             .with_min_len(GRAIN_CHUNK)
             .for_each(|(((frame, center), reach), (g, level))| {
-                *frame = frame_of(g, level);
-                *center = frame.shape.center;
-                *reach = frame.shape.bounding_radius;
+                if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
+                    frame.write_circle(g, density);
+                } else {
+                    *frame = Frame::of_grain(g, density);
+                }
+                *center = frame.center;
+                *reach = frame.bounding_radius;
             });
         let frames_done = Instant::now();
         self.phase_times.frames += (frames_done - start).as_secs_f64();
@@ -585,30 +631,25 @@ impl World {
                         let [i, j] = pairs[p];
                         let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
                         // The centre of the second grain, or of its image that meets the first.
-                        let mut center_j = fj.shape.center;
+                        let mut center_j = fj.center;
                         // In a periodic cell: the branch vector, and the affine field's `L d`.
                         let mut branch = DVec2::ZERO;
                         let mut affine_rate = DVec2::ZERO;
                         if let Some((cell, velocity_gradient)) = &periodic {
                             center_j += cell.image_shift(images[p]);
-                            branch = center_j - fi.shape.center;
+                            branch = center_j - fi.center;
                             affine_rate = *velocity_gradient * branch;
                         }
                         let mut hint = slot.hint;
                         let history = slot.tangential_history;
                         let overlap = if fi.circle && fj.circle {
-                            disc_disc(
-                                fi.shape.center,
-                                fi.shape.bounding_radius,
-                                center_j,
-                                fj.shape.bounding_radius,
-                            )
+                            disc_disc(fi.center, fi.bounding_radius, center_j, fj.bounding_radius)
                         } else {
                             let shape_j = GrainShape {
                                 center: center_j,
-                                ..fj.shape
+                                ..fj.shape()
                             };
-                            grain_grain_hinted(table, &fi.shape, &shape_j, &mut hint)
+                            grain_grain_hinted(table, &fi.shape(), &shape_j, &mut hint)
                         };
                         // Each outcome writes the slot once: an open or failed pair keeps only its
                         // search hint (its spring resets), a contact the whole record.
@@ -640,7 +681,7 @@ impl World {
                                     }
                                     Ok(response) => {
                                         let velocity_j = fj.velocity
-                                            + fj.velocity_gradient * (c.point - center_j);
+                                            + fj.velocity_gradient() * (c.point - center_j);
                                         let relative_velocity =
                                             velocity_j - fi.velocity_at(c.point) + affine_rate;
                                         let gap_rate = relative_velocity.dot(c.normal);
@@ -765,18 +806,14 @@ impl World {
                             continue;
                         }
                         let (force, cap, center) = if !end.second {
-                            (c.force_on_first(), c.cap_area_first, frame.shape.center)
+                            (c.force_on_first(), c.cap_area_first, frame.center)
                         } else {
                             // The contact point lies at the image of this grain that met the first.
                             let image = match &cell {
                                 Some(cell) => cell.image_shift(neighbors.images[end.pair]),
                                 None => DVec2::ZERO,
                             };
-                            (
-                                -c.force_on_first(),
-                                c.cap_area_second,
-                                frame.shape.center + image,
-                            )
+                            (-c.force_on_first(), c.cap_area_second, frame.center + image)
                         };
                         load.add(force, c.point - center, cap);
                         load.contacts += 1;
@@ -791,14 +828,13 @@ impl World {
                             0.0
                         };
                         // Most grains are far from every wall: skip the call.
-                        if wall.height(frame.shape.center) >= frame.shape.bounding_radius {
+                        if wall.height(frame.center) >= frame.bounding_radius {
                             continue;
                         }
                         let overlap = if frame.circle {
-                            let shape = &frame.shape;
-                            disc_wall(shape.center, shape.bounding_radius, wall.point, wall.normal)
+                            disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
                         } else {
-                            grain_wall(table, &frame.shape, wall.point, wall.normal)
+                            grain_wall(table, &frame.shape(), wall.point, wall.normal)
                         };
                         match overlap {
                             Overlap::Separate => {}
@@ -851,7 +887,7 @@ impl World {
                                             sums.totals.friction_dissipation += t.dissipated;
                                             sums.totals.sliding_contacts += t.sliding as u64;
                                         }
-                                        load.add(force, c.point - frame.shape.center, c.cap_area_i);
+                                        load.add(force, c.point - frame.center, c.cap_area_i);
                                         load.wall_contacts += 1;
                                         sums.totals.wall_force[w] += normal_force.dot(wall.normal);
                                         sums.totals.capped_contacts += response.capped as u64;
