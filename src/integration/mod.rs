@@ -628,6 +628,9 @@ impl World {
                     let mut sliding = 0;
                     for (k, slot) in out.iter_mut().enumerate() {
                         let p = first_pair + k;
+                        if let Some(&[_, ahead]) = pairs.get(p + PREFETCH_AHEAD) {
+                            prefetch(&frames[ahead as usize]);
+                        }
                         let [i, j] = pairs[p];
                         let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
                         // The centre of the second grain, or of its image that meets the first.
@@ -1077,6 +1080,22 @@ fn pair_chunks_by_first_grain<'a>(
     }
     debug_assert!(rest.is_empty(), "every pair's first grain is a grain");
     chunks
+}
+
+/// How many pairs ahead the pair pass asks for the second grain's frame.
+const PREFETCH_AHEAD: usize = 8;
+
+/// Asks the processor to bring `value`'s first cache line in: a hint, no effect on results.
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch has no architectural effect; the pointer comes from a reference.
+    unsafe {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        _mm_prefetch::<_MM_HINT_T0>(value as *const T as *const i8);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
 }
 
 /// The sums a grain needs from its contacts.
