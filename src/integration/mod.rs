@@ -1330,3 +1330,87 @@ fn check_grain(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bits(m: DMat2) -> [u64; 4] {
+        m.to_cols_array().map(f64::to_bits)
+    }
+
+    fn shape_bits(s: &GrainShape) -> Vec<u64> {
+        let mut v = vec![s.center.x.to_bits(), s.center.y.to_bits()];
+        v.extend(bits(s.map));
+        v.extend(bits(s.inv_map));
+        v.push(s.bounding_radius.to_bits());
+        v
+    }
+
+    fn deformed_grain() -> Grain {
+        Grain {
+            radius: 0.013,
+            center: DVec2::new(0.3, -0.2),
+            velocity: DVec2::new(1e-3, -2e-3),
+            theta: 0.7,
+            omega: -0.4,
+            eps1: 0.03,
+            eps1_rate: 1e-3,
+            eps2: -0.02,
+            eps2_rate: -2e-3,
+            alpha: 0.3,
+            alpha_rate: 0.05,
+        }
+    }
+
+    #[test]
+    fn a_frame_is_two_cache_lines_and_a_circle_reads_one() {
+        // The layout is the point of the type (issue #16): two aligned lines, the circle's
+        // fields all in the first.
+        assert_eq!(std::mem::size_of::<Frame>(), 128);
+        assert_eq!(std::mem::align_of::<Frame>(), 64);
+        let circle_end = std::mem::offset_of!(Frame, circle) + 1;
+        assert!(circle_end <= 64, "circle fields end at byte {circle_end}");
+        assert!(std::mem::offset_of!(Frame, map) >= 64);
+    }
+
+    #[test]
+    fn frames_give_the_grains_own_shape_and_velocity_field_bit_for_bit() {
+        // Expectation: a deformed grain's frame rebuilds the shape and velocity gradient that
+        // `Grain::shape_and_velocity_gradient` computes (inv_map = map.inverse()), every bit.
+        let g = deformed_grain();
+        let (shape, gradient) = g.shape_and_velocity_gradient();
+        let frame = Frame::of_grain(&g, 2.0);
+        assert!(!frame.circle);
+        assert_eq!(shape_bits(&frame.shape()), shape_bits(&shape));
+        assert_eq!(bits(frame.velocity_gradient()), bits(gradient));
+        let x = DVec2::new(0.31, -0.19);
+        assert_eq!(frame.velocity_at(x), g.velocity + gradient * (x - g.center));
+        assert_eq!(frame.mass.to_bits(), g.mass(2.0).to_bits());
+
+        // A circle (rigid, equal strains) is the disc of radius R (1 + eps) spinning at omega,
+        // whatever stale second line the frame held before.
+        let mut disc = deformed_grain();
+        disc.eps2 = disc.eps1;
+        let mut frame = Frame::of_grain(&g, 2.0);
+        frame.write_circle(&disc, 2.0);
+        let radius = disc.radius * (1.0 + disc.eps1);
+        let expected = GrainShape {
+            center: disc.center,
+            map: DMat2::from_diagonal(DVec2::splat(radius)),
+            inv_map: DMat2::from_diagonal(DVec2::splat(1.0 / radius)),
+            bounding_radius: radius,
+        };
+        assert!(frame.circle);
+        assert_eq!(shape_bits(&frame.shape()), shape_bits(&expected));
+        assert_eq!(
+            bits(frame.velocity_gradient()),
+            bits(QUARTER_TURN * disc.omega)
+        );
+        let arm = x - disc.center;
+        assert_eq!(
+            frame.velocity_at(x),
+            disc.velocity + disc.omega * DVec2::new(-arm.y, arm.x)
+        );
+    }
+}
