@@ -255,7 +255,7 @@ fn free_cluster_conserves_momentum_newtons_third_law() {
     let mut peak_force: f64 = 0.0;
     for _ in 0..200 {
         world.step().unwrap();
-        for c in &world.pair_contacts {
+        for (_, c, _) in world.contacts() {
             peak_force = peak_force.max(c.force.abs());
         }
     }
@@ -417,4 +417,44 @@ fn stress_servo_brings_the_wall_stresses_to_their_targets() {
     let s = state(&world);
     assert!((s.sxx - sxx).abs() < 0.01 * sxx, "sxx = {}", s.sxx);
     assert!((s.syy - syy).abs() < 0.01 * syy, "syy = {}", s.syy);
+}
+
+#[test]
+fn contacts_are_exactly_the_overlapping_candidates_and_end_when_the_grains_part() {
+    // Expectation: a contact is listed for the candidates whose discs overlap and for no other
+    // (a candidate within the skin but apart has none), with the chord of the two circles as
+    // its length, 2 sqrt(r^2 - (d/2)^2) for equal radii r at distance d, and a repulsive
+    // force; once the grains part, it is gone and its pair carries no tangential spring.
+    let r = 0.5;
+    let d = 0.95;
+    let mut grains = vec![
+        Grain::at_rest(DVec2::ZERO, r),
+        Grain::at_rest(DVec2::new(d, 0.0), r),
+        Grain::at_rest(DVec2::new(0.0, -1.02), r),
+    ];
+    grains[1].velocity = DVec2::new(0.05, 0.0);
+    let mut p = params(0.3, 0.4, r);
+    p.level = ModelLevel::Rigid;
+    let mut world = World::new(p, grains, Vec::new());
+    world.step().unwrap();
+    assert!(
+        world.neighbors.pairs.contains(&[0, 2]),
+        "the apart pair is a candidate"
+    );
+    let contacts: Vec<_> = world.contacts().collect();
+    assert_eq!(contacts.len(), 1);
+    let ([i, j], contact, state) = contacts[0];
+    assert_eq!([i, j], [0, 1]);
+    let chord = 2.0 * (r * r - 0.25 * d * d).sqrt();
+    assert!((state.contact_length - chord).abs() < 1e-12 * chord);
+    assert!(contact.force < 0.0, "repulsive: {}", contact.force);
+    assert_eq!(world.totals.contacts, 1);
+    let mut steps = 0;
+    while world.contacts().next().is_some() {
+        world.step().unwrap();
+        steps += 1;
+        assert!(steps < 100_000, "the grains never parted");
+    }
+    assert_eq!(world.totals.contacts, 0);
+    assert!(world.contact_history().pairs.is_empty());
 }

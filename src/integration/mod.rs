@@ -152,27 +152,40 @@ impl Frame {
     }
 }
 
-/// One candidate pair's contact in the current step.
+/// What the pair pass keeps of a candidate pair whether it touches or not: what it carries to
+/// the next step, and its contact length.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PairState {
+    /// Where this pair's chains were: the next step's search starts there.
+    pub hint: PairHint,
+    /// The tangential spring's force (SPEC §13), carried to the next step while the contact
+    /// stays closed; zero while the pair is open.
+    pub tangential_history: f64,
+    /// The contact's length `L_c` in the last step (zero when open): kept here, beside the
+    /// state the pass rewrites anyway, so that a [`PairContact`] fills one cache line.
+    pub contact_length: f64,
+}
+
+/// A contact of the last step between the two grains of a candidate pair: what the grain pass
+/// reads, in one aligned cache line.
+///
+/// Only the pairs in contact have one written (see [`World::contacts`]): an open candidate
+/// costs its step a flag and its [`PairState`], not a record (issue #16: rewriting and
+/// rereading a 112-byte record for every candidate took much of a loose packing's step).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[repr(C, align(64))]
 pub struct PairContact {
-    pub active: bool,
     /// Normal from the pair's first grain towards its second.
     pub normal: DVec2,
     /// Total normal force (<= 0: repulsive); the force on the first grain is `force * normal`.
     pub force: f64,
-    pub point: DVec2,
-    pub length: f64,
-    pub normal_gap: f64,
-    pub cap_area_first: f64,
-    pub cap_area_second: f64,
-    pub capped: bool,
     /// Tangential force on the first grain along `t = perp(normal)` (SPEC §13; zero without
     /// friction); the force on the first grain is `force * normal + tangential_force * t`.
     pub tangential_force: f64,
-    /// The tangential spring's force, carried to the next step while the contact stays closed.
-    pub tangential_history: f64,
-    /// Where this pair's chains were: the next step's search starts there.
-    pub hint: PairHint,
+    pub point: DVec2,
+    /// The areas of the two grains' caps cut off by the contact (`S_j` of SPEC §5).
+    pub cap_area_first: f64,
+    pub cap_area_second: f64,
 }
 
 impl PairContact {
@@ -337,7 +350,15 @@ pub struct World {
     pub step: u64,
     pub neighbors: NeighborList,
     pub frames: Vec<Frame>,
-    pub pair_contacts: Vec<PairContact>,
+    /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
+    pair_state: Vec<PairState>,
+    /// whether it touched in the last step,
+    pair_active: Vec<bool>,
+    /// and its contact where it did (a stale record elsewhere: read through
+    /// [`World::contacts`]).
+    pair_contacts: Vec<PairContact>,
+    /// Where the pair pass's chunks end (see [`pair_chunk_ends`]), recomputed with the list.
+    pair_chunk_ends: Vec<usize>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
     /// Each grain's model level (all at `params.level` unless the level is adaptive).
@@ -379,7 +400,10 @@ impl World {
             step: 0,
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
+            pair_state: Vec::new(),
+            pair_active: Vec::new(),
             pair_contacts: Vec::new(),
+            pair_chunk_ends: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
             levels: vec![GrainLevel::new(start); n],
@@ -444,9 +468,9 @@ impl World {
             .neighbors
             .pairs
             .iter()
-            .zip(&self.pair_contacts)
-            .filter(|(_, c)| c.tangential_history.to_bits() != 0)
-            .map(|(&pair, c)| (pair, c.tangential_history))
+            .zip(&self.pair_state)
+            .filter(|(_, s)| s.tangential_history.to_bits() != 0)
+            .map(|(&pair, s)| (pair, s.tangential_history))
             .collect();
         let mut walls = Vec::new();
         for (g, row) in self.wall_history.iter().enumerate() {
@@ -488,14 +512,16 @@ impl World {
             ));
         }
         self.neighbors.pairs = history.pairs.iter().map(|(pair, _)| *pair).collect();
-        self.pair_contacts = history
+        self.pair_state = history
             .pairs
             .iter()
-            .map(|&(_, h)| PairContact {
+            .map(|&(_, h)| PairState {
                 tangential_history: h,
                 ..Default::default()
             })
             .collect();
+        self.pair_active = vec![false; history.pairs.len()];
+        self.pair_contacts = vec![PairContact::default(); history.pairs.len()];
         self.neighbors.invalidate();
         self.wall_history = vec![[0.0; MAX_WALLS]; self.grains.len()];
         for &(g, w, h) in &history.walls {
@@ -556,30 +582,20 @@ impl World {
         };
         if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
-            // Only a pair's search hint and tangential spring carry over: keeping them alone,
-            // and reusing the records' buffer for the new list, holds the memory peak of a
-            // rebuild down (a second set of records was a third of a world's memory at 10^6
-            // grains).
-            let carried: Vec<(PairHint, f64)> = self
-                .pair_contacts
-                .par_iter()
-                .map(|c| (c.hint, c.tangential_history))
-                .collect();
+            // Only a pair's search hint and tangential spring carry over (its state); the
+            // contact records of the old list are left to be overwritten.
+            let old_state = std::mem::take(&mut self.pair_state);
             match &cell {
                 Some(cell) => self.neighbors.build_periodic(centers, reach, cell),
                 None => self.neighbors.build(centers, reach),
             }
-            // Pair indices change with the list: carry each surviving pair's search hint over.
+            // Pair indices change with the list: carry each surviving pair's state over.
             // Both lists are sorted by (i, j), so each chunk of the new list merges with the
             // old one from where its first pair would be: a parallel pass, where a serial
             // merge was the largest part of a rebuild that a second thread could not share.
-            // Only what the pair pass reads is written (the hint and the spring; the flag so
-            // that no slot claims a contact): that pass rewrites every record before anything
-            // else reads one.
             let pairs = &self.neighbors.pairs;
-            self.pair_contacts
-                .resize(pairs.len(), PairContact::default());
-            self.pair_contacts
+            let mut state = vec![PairState::default(); pairs.len()];
+            state
                 .par_chunks_mut(PAIR_CHUNK)
                 .zip(pairs.par_chunks(PAIR_CHUNK))
                 .for_each(|(slots, chunk_pairs)| {
@@ -588,18 +604,22 @@ impl World {
                         while k < old_pairs.len() && old_pairs[k] < *pair {
                             k += 1;
                         }
-                        (slot.hint, slot.tangential_history) =
-                            if k < old_pairs.len() && old_pairs[k] == *pair {
-                                carried[k]
-                            } else {
-                                (PairHint::default(), 0.0)
-                            };
-                        slot.active = false;
+                        if k < old_pairs.len() && old_pairs[k] == *pair {
+                            *slot = old_state[k];
+                        }
                     }
                 });
+            self.pair_state = state;
         }
-        self.pair_contacts
-            .resize(self.neighbors.pairs.len(), PairContact::default());
+        // The pair pass writes every flag, and a record wherever a flag is set, before anything
+        // reads them.
+        let pairs = self.neighbors.pairs.len();
+        self.pair_state.resize(pairs, PairState::default());
+        self.pair_active.resize(pairs, false);
+        self.pair_contacts.resize(pairs, PairContact::default());
+        if rebuild || self.pair_chunk_ends.len() != n.div_ceil(GRAIN_CHUNK) {
+            self.pair_chunk_ends = pair_chunk_ends(&self.neighbors.pairs, n);
+        }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
     }
@@ -617,137 +637,152 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
-        let chunk_results: Vec<PairSums> =
-            pair_chunks_by_first_grain(pairs, &mut self.pair_contacts, self.grains.len())
-                .into_par_iter()
-                .map(|(first_pair, out)| {
-                    let mut capped = 0;
-                    let mut moment = [0.0; 3];
-                    let mut failure = None;
-                    let mut dissipation = 0.0;
-                    let mut sliding = 0;
-                    for (k, slot) in out.iter_mut().enumerate() {
-                        let p = first_pair + k;
-                        if let Some(&[_, ahead]) = pairs.get(p + PREFETCH_AHEAD) {
-                            prefetch(&frames[ahead as usize]);
-                        }
-                        let [i, j] = pairs[p];
-                        let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
-                        // The centre of the second grain, or of its image that meets the first.
-                        let mut center_j = fj.center;
-                        // In a periodic cell: the branch vector, and the affine field's `L d`.
-                        let mut branch = DVec2::ZERO;
-                        let mut affine_rate = DVec2::ZERO;
-                        if let Some((cell, velocity_gradient)) = &periodic {
-                            center_j += cell.image_shift(images[p]);
-                            branch = center_j - fi.center;
-                            affine_rate = *velocity_gradient * branch;
-                        }
-                        let mut hint = slot.hint;
-                        let history = slot.tangential_history;
-                        let overlap = if fi.circle && fj.circle {
-                            disc_disc(fi.center, fi.bounding_radius, center_j, fj.bounding_radius)
-                        } else {
-                            let shape_j = GrainShape {
-                                center: center_j,
-                                ..fj.shape()
-                            };
-                            grain_grain_hinted(table, &fi.shape(), &shape_j, &mut hint)
+        let ends = &self.pair_chunk_ends;
+        let chunks = split_at_ends(&mut self.pair_state, ends)
+            .into_iter()
+            .zip(split_at_ends(&mut self.pair_active, ends))
+            .zip(split_at_ends(&mut self.pair_contacts, ends))
+            .enumerate()
+            .map(|(c, ((state, active), records))| {
+                let first_pair = if c == 0 { 0 } else { ends[c - 1] };
+                (first_pair, state, active, records)
+            })
+            .collect::<Vec<_>>();
+        let chunk_results: Vec<PairSums> = chunks
+            .into_par_iter()
+            .map(|(first_pair, states, actives, records)| {
+                let mut capped = 0;
+                let mut moment = [0.0; 3];
+                let mut failure = None;
+                let mut dissipation = 0.0;
+                let mut sliding = 0;
+                for (k, ((state, active), record)) in states
+                    .iter_mut()
+                    .zip(actives.iter_mut())
+                    .zip(records.iter_mut())
+                    .enumerate()
+                {
+                    let p = first_pair + k;
+                    if let Some(&[_, ahead]) = pairs.get(p + PREFETCH_AHEAD) {
+                        prefetch(&frames[ahead as usize]);
+                    }
+                    let [i, j] = pairs[p];
+                    let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
+                    // The centre of the second grain, or of its image that meets the first.
+                    let mut center_j = fj.center;
+                    // In a periodic cell: the branch vector, and the affine field's `L d`.
+                    let mut branch = DVec2::ZERO;
+                    let mut affine_rate = DVec2::ZERO;
+                    if let Some((cell, velocity_gradient)) = &periodic {
+                        center_j += cell.image_shift(images[p]);
+                        branch = center_j - fi.center;
+                        affine_rate = *velocity_gradient * branch;
+                    }
+                    let mut hint = state.hint;
+                    let history = state.tangential_history;
+                    let overlap = if fi.circle && fj.circle {
+                        disc_disc(fi.center, fi.bounding_radius, center_j, fj.bounding_radius)
+                    } else {
+                        let shape_j = GrainShape {
+                            center: center_j,
+                            ..fj.shape()
                         };
-                        // Each outcome writes the slot once: an open or failed pair keeps only its
-                        // search hint (its spring resets), a contact the whole record.
-                        let open = PairContact {
-                            hint,
-                            ..Default::default()
-                        };
-                        *slot = match overlap {
-                            Overlap::Separate => open,
-                            Overlap::Swallowed => {
-                                failure.get_or_insert(Instability::Swallowed {
+                        grain_grain_hinted(table, &fi.shape(), &shape_j, &mut hint)
+                    };
+                    // An open or failed pair keeps only its search hint (its spring resets);
+                    // a contact writes its record too.
+                    let touches = match overlap {
+                        Overlap::Separate => false,
+                        Overlap::Swallowed => {
+                            failure.get_or_insert(Instability::Swallowed {
+                                step,
+                                grain: i as usize,
+                                other: Some(j as usize),
+                            });
+                            false
+                        }
+                        Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
+                            Err(exit) => {
+                                failure.get_or_insert(Instability::ContactDomain {
                                     step,
                                     grain: i as usize,
                                     other: Some(j as usize),
+                                    length: exit.length,
+                                    normal_gap: exit.normal_gap,
                                 });
-                                open
+                                false
                             }
-                            Overlap::Contact(c) => {
-                                match params.law.response(c.length, c.normal_gap) {
-                                    Err(exit) => {
-                                        failure.get_or_insert(Instability::ContactDomain {
-                                            step,
-                                            grain: i as usize,
-                                            other: Some(j as usize),
-                                            length: exit.length,
-                                            normal_gap: exit.normal_gap,
-                                        });
-                                        open
-                                    }
-                                    Ok(response) => {
-                                        let velocity_j = fj.velocity
-                                            + fj.velocity_gradient() * (c.point - center_j);
-                                        let relative_velocity =
-                                            velocity_j - fi.velocity_at(c.point) + affine_rate;
-                                        let gap_rate = relative_velocity.dot(c.normal);
-                                        let effective_mass =
-                                            fi.mass * fj.mass / (fi.mass + fj.mass);
-                                        capped += response.capped as u64;
-                                        let force = damped_normal_force(
-                                            response.force,
+                            Ok(response) => {
+                                let velocity_j =
+                                    fj.velocity + fj.velocity_gradient() * (c.point - center_j);
+                                let relative_velocity =
+                                    velocity_j - fi.velocity_at(c.point) + affine_rate;
+                                let gap_rate = relative_velocity.dot(c.normal);
+                                let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
+                                capped += response.capped as u64;
+                                let force = damped_normal_force(
+                                    response.force,
+                                    response.stiffness,
+                                    effective_mass,
+                                    params.contact_damping,
+                                    gap_rate,
+                                );
+                                let tangential = match &params.friction {
+                                    Some(friction) if friction.grains > 0.0 => {
+                                        friction.law.response(
+                                            history,
                                             response.stiffness,
-                                            effective_mass,
-                                            params.contact_damping,
-                                            gap_rate,
-                                        );
-                                        let tangential = match &params.friction {
-                                            Some(friction) if friction.grains > 0.0 => {
-                                                friction.law.response(
-                                                    history,
-                                                    response.stiffness,
-                                                    force,
-                                                    relative_velocity.dot(c.normal.perp()),
-                                                    friction.grains,
-                                                    effective_mass,
-                                                    params.dt,
-                                                )
-                                            }
-                                            _ => TangentialResponse::default(),
-                                        };
-                                        dissipation += tangential.dissipated;
-                                        sliding += tangential.sliding as u64;
-                                        PairContact {
-                                            active: true,
-                                            normal: c.normal,
                                             force,
-                                            point: c.point,
-                                            length: c.length,
-                                            normal_gap: c.normal_gap,
-                                            cap_area_first: c.cap_area_i,
-                                            cap_area_second: c.cap_area_j,
-                                            capped: response.capped,
-                                            tangential_force: tangential.force,
-                                            tangential_history: tangential.history,
-                                            hint,
-                                        }
+                                            relative_velocity.dot(c.normal.perp()),
+                                            friction.grains,
+                                            effective_mass,
+                                            params.dt,
+                                        )
+                                    }
+                                    _ => TangentialResponse::default(),
+                                };
+                                dissipation += tangential.dissipated;
+                                sliding += tangential.sliding as u64;
+                                *record = PairContact {
+                                    normal: c.normal,
+                                    force,
+                                    tangential_force: tangential.force,
+                                    point: c.point,
+                                    cap_area_first: c.cap_area_i,
+                                    cap_area_second: c.cap_area_j,
+                                };
+                                *state = PairState {
+                                    hint,
+                                    tangential_history: tangential.history,
+                                    contact_length: c.length,
+                                };
+                                if periodic.is_some() {
+                                    let share = symmetric_dyad(record.force_on_first(), branch);
+                                    for (sum, x) in moment.iter_mut().zip(share) {
+                                        *sum += x;
                                     }
                                 }
+                                true
                             }
+                        },
+                    };
+                    *active = touches;
+                    if !touches {
+                        *state = PairState {
+                            hint,
+                            ..Default::default()
                         };
-                        if slot.active && periodic.is_some() {
-                            let share = symmetric_dyad(slot.force_on_first(), branch);
-                            for (sum, x) in moment.iter_mut().zip(share) {
-                                *sum += x;
-                            }
-                        }
                     }
-                    PairSums {
-                        capped,
-                        moment,
-                        dissipation,
-                        sliding,
-                        failure,
-                    }
-                })
-                .collect();
+                }
+                PairSums {
+                    capped,
+                    moment,
+                    dissipation,
+                    sliding,
+                    failure,
+                }
+            })
+            .collect();
         let mut totals = PairSums::default();
         for sums in chunk_results {
             if let Some(f) = sums.failure {
@@ -778,7 +813,7 @@ impl World {
         // A periodic cell's virtual walls meet no grain.
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
-        let pair_contacts = &self.pair_contacts;
+        let (pair_active, pair_contacts) = (&self.pair_active, &self.pair_contacts);
         let wall_friction = params
             .friction
             .as_ref()
@@ -804,10 +839,10 @@ impl World {
                     let frame = &frames[g];
                     let mut load = ContactLoad::default();
                     for end in neighbors.pairs_of(g) {
-                        let c = &pair_contacts[end.pair];
-                        if !c.active {
+                        if !pair_active[end.pair] {
                             continue;
                         }
+                        let c = &pair_contacts[end.pair];
                         let (force, cap, center) = if !end.second {
                             (c.force_on_first(), c.cap_area_first, frame.center)
                         } else {
@@ -1018,6 +1053,18 @@ impl World {
             .follow_affine((from_lo, from_hi), (to_lo, to_hi));
     }
 
+    /// The contacts of the last step between grains, in pair order: the pair `[i, j]`, its
+    /// contact, and its state (where the contact length is).
+    pub fn contacts(&self) -> impl Iterator<Item = ([u32; 2], &PairContact, &PairState)> + '_ {
+        self.neighbors
+            .pairs
+            .iter()
+            .zip(&self.pair_active)
+            .zip(self.pair_contacts.iter().zip(&self.pair_state))
+            .filter(|((_, active), _)| **active)
+            .map(|((pair, _), (contact, state))| (*pair, contact, state))
+    }
+
     /// Coordination numbers (z, z_nr, z_nr3) of the last step: `2C/N` over grain–grain
     /// contacts; the same over the grains with at least 2 grain contacts and the contacts between
     /// them; and the same without the rattlers of the 3-contact rule
@@ -1031,8 +1078,8 @@ impl World {
             .neighbors
             .pairs
             .iter()
-            .zip(&self.pair_contacts)
-            .filter(|([i, j], c)| c.active && carrying(*i) && carrying(*j))
+            .zip(&self.pair_active)
+            .filter(|([i, j], active)| **active && carrying(*i) && carrying(*j))
             .count();
         let z_nr = if grains_nr > 0 {
             2.0 * contacts_nr as f64 / grains_nr as f64
@@ -1044,8 +1091,8 @@ impl World {
             .neighbors
             .pairs
             .iter()
-            .zip(&self.pair_contacts)
-            .filter(|(_, c)| c.active)
+            .zip(&self.pair_active)
+            .filter(|(_, active)| **active)
             .map(|([i, j], _)| (*i, *j))
             .collect();
         let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
@@ -1053,9 +1100,8 @@ impl World {
     }
 }
 
-/// The pair records cut into one chunk per grain chunk ([`GRAIN_CHUNK`]): chunk c holds the
-/// pairs whose first grain lies in grain chunk c (the list is sorted by first grain), with the
-/// index of its first pair.
+/// Where the pair pass's chunks end, one chunk per grain chunk ([`GRAIN_CHUNK`]): chunk c
+/// holds the pairs whose first grain lies in grain chunk c (the list is sorted by first grain).
 ///
 /// The pair pass sums each chunk's contacts (the dissipation, a periodic cell's stress) in
 /// pair order and then the chunks in order. Chunks of a fixed number of pairs would group
@@ -1063,22 +1109,28 @@ impl World {
 /// when the list was built (a resumed run rebuilds it at once, a thinner skin more often).
 /// Aligned with the grains, each chunk sums the same contacts in the same order whatever else
 /// the list holds.
-fn pair_chunks_by_first_grain<'a>(
-    pairs: &[[u32; 2]],
-    records: &'a mut [PairContact],
-    grains: usize,
-) -> Vec<(usize, &'a mut [PairContact])> {
-    let mut chunks = Vec::with_capacity(grains.div_ceil(GRAIN_CHUNK));
-    let mut rest = records;
+fn pair_chunk_ends(pairs: &[[u32; 2]], grains: usize) -> Vec<usize> {
+    let ends: Vec<usize> = (0..grains.div_ceil(GRAIN_CHUNK))
+        .map(|chunk| pairs.partition_point(|pair| (pair[0] as usize) < (chunk + 1) * GRAIN_CHUNK))
+        .collect();
+    debug_assert!(
+        ends.last().is_none_or(|&end| end == pairs.len()),
+        "every pair's first grain is a grain"
+    );
+    ends
+}
+
+/// `values` cut before each of `ends` (increasing, the last one `values.len()`).
+fn split_at_ends<'a, T>(values: &'a mut [T], ends: &[usize]) -> Vec<&'a mut [T]> {
+    let mut chunks = Vec::with_capacity(ends.len());
+    let mut rest = values;
     let mut start = 0;
-    for chunk in 0..grains.div_ceil(GRAIN_CHUNK) {
-        let end = pairs.partition_point(|pair| (pair[0] as usize) < (chunk + 1) * GRAIN_CHUNK);
-        let (records, tail) = std::mem::take(&mut rest).split_at_mut(end - start);
-        chunks.push((start, records));
+    for &end in ends {
+        let (chunk, tail) = std::mem::take(&mut rest).split_at_mut(end - start);
+        chunks.push(chunk);
         rest = tail;
         start = end;
     }
-    debug_assert!(rest.is_empty(), "every pair's first grain is a grain");
     chunks
 }
 
@@ -1372,6 +1424,13 @@ mod tests {
         let circle_end = std::mem::offset_of!(Frame, circle) + 1;
         assert!(circle_end <= 64, "circle fields end at byte {circle_end}");
         assert!(std::mem::offset_of!(Frame, map) >= 64);
+    }
+
+    #[test]
+    fn a_pair_contact_is_one_cache_line() {
+        // The grain pass reads one aligned line per contact (issue #16).
+        assert_eq!(std::mem::size_of::<PairContact>(), 64);
+        assert_eq!(std::mem::align_of::<PairContact>(), 64);
     }
 
     #[test]

@@ -204,18 +204,14 @@ impl FrameContour {
 /// The active contacts of the world's last step, in pair order.
 pub fn active_contacts(world: &World) -> Vec<FrameContact> {
     world
-        .neighbors
-        .pairs
-        .iter()
-        .zip(&world.pair_contacts)
-        .filter(|(_, c)| c.active)
-        .map(|(&[i, j], c)| FrameContact {
+        .contacts()
+        .map(|([i, j], c, state)| FrameContact {
             first: i,
             second: j,
             point: c.point,
             normal: c.normal,
             force: c.force,
-            length: c.length,
+            length: state.contact_length,
             tangential_force: c.tangential_force,
         })
         .collect()
