@@ -2,8 +2,10 @@
 
 use glam::{DMat2, DVec2};
 use sdem::boundary::walls::{Wall, box_walls};
+use sdem::contact::friction::FrictionSettings;
 use sdem::grain::constitutive::principal_stress;
 use sdem::grain::{Grain, Material, ModelLevel};
+use sdem::integration::parameters::Friction;
 use sdem::integration::parameters::critical_time_step;
 use sdem::integration::{Parameters, World};
 use std::f64::consts::PI;
@@ -424,7 +426,8 @@ fn contacts_are_exactly_the_overlapping_candidates_and_end_when_the_grains_part(
     // Expectation: a contact is listed for the candidates whose discs overlap and for no other
     // (a candidate within the skin but apart has none), with the chord of the two circles as
     // its length, 2 sqrt(r^2 - (d/2)^2) for equal radii r at distance d, and a repulsive
-    // force; once the grains part, it is gone and its pair carries no tangential spring.
+    // force. A sliding contact loads its tangential spring; once the grains part, the contact
+    // is gone and its pair carries no spring.
     let r = 0.5;
     let d = 0.95;
     let mut grains = vec![
@@ -432,9 +435,16 @@ fn contacts_are_exactly_the_overlapping_candidates_and_end_when_the_grains_part(
         Grain::at_rest(DVec2::new(d, 0.0), r),
         Grain::at_rest(DVec2::new(0.0, -1.02), r),
     ];
-    grains[1].velocity = DVec2::new(0.05, 0.0);
+    grains[1].velocity = DVec2::new(0.05, 0.02);
     let mut p = params(0.3, 0.4, r);
     p.level = ModelLevel::Rigid;
+    p.friction = Friction::new(
+        &FrictionSettings {
+            grains: 0.5,
+            ..Default::default()
+        },
+        &[],
+    );
     let mut world = World::new(p, grains, Vec::new());
     world.step().unwrap();
     assert!(
@@ -449,6 +459,9 @@ fn contacts_are_exactly_the_overlapping_candidates_and_end_when_the_grains_part(
     assert!((state.contact_length - chord).abs() < 1e-12 * chord);
     assert!(contact.force < 0.0, "repulsive: {}", contact.force);
     assert_eq!(world.totals.contacts, 1);
+    let springs = world.contact_history().pairs;
+    assert_eq!(springs.len(), 1, "the sliding contact loads its spring");
+    assert_eq!(springs[0].0, [0, 1]);
     let mut steps = 0;
     while world.contacts().next().is_some() {
         world.step().unwrap();

@@ -611,15 +611,12 @@ impl World {
                     }
                 });
             self.pair_state = state;
-        }
-        // The pair pass writes every flag, and a record wherever a flag is set, before anything
-        // reads them.
-        let pairs = self.neighbors.pairs.len();
-        self.pair_state.resize(pairs, PairState::default());
-        self.pair_active.resize(pairs, false);
-        self.pair_contacts.resize(pairs, PairContact::default());
-        if rebuild || self.pair_chunk_ends.len() != n.div_ceil(GRAIN_CHUNK) {
-            self.pair_chunk_ends = pair_chunk_ends(&self.neighbors.pairs, n);
+            // The pair pass writes every flag, and a record wherever a flag is set, before
+            // anything reads them.
+            self.pair_active.resize(pairs.len(), false);
+            self.pair_contacts
+                .resize(pairs.len(), PairContact::default());
+            self.pair_chunk_ends = pair_chunk_ends(pairs, n);
         }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
@@ -638,17 +635,12 @@ impl World {
         let periodic = self
             .periodic
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
-        let ends = &self.pair_chunk_ends;
-        let chunks = split_at_ends(&mut self.pair_state, ends)
-            .into_iter()
-            .zip(split_at_ends(&mut self.pair_active, ends))
-            .zip(split_at_ends(&mut self.pair_contacts, ends))
-            .enumerate()
-            .map(|(c, ((state, active), records))| {
-                let first_pair = if c == 0 { 0 } else { ends[c - 1] };
-                (first_pair, state, active, records)
-            })
-            .collect::<Vec<_>>();
+        let chunks = pair_chunks(
+            &self.pair_chunk_ends,
+            &mut self.pair_state,
+            &mut self.pair_active,
+            &mut self.pair_contacts,
+        );
         let chunk_results: Vec<PairSums> = chunks
             .into_par_iter()
             .map(|(first_pair, states, actives, records)| {
@@ -1121,15 +1113,28 @@ fn pair_chunk_ends(pairs: &[[u32; 2]], grains: usize) -> Vec<usize> {
     ends
 }
 
-/// `values` cut before each of `ends` (increasing, the last one `values.len()`).
-fn split_at_ends<'a, T>(values: &'a mut [T], ends: &[usize]) -> Vec<&'a mut [T]> {
+/// The pair pass's chunks: for each, the index of its first pair and its pairs' states, flags
+/// and records, cut at `ends` (increasing, the last one the number of pairs).
+#[allow(clippy::type_complexity)]
+fn pair_chunks<'a>(
+    ends: &[usize],
+    mut states: &'a mut [PairState],
+    mut actives: &'a mut [bool],
+    mut records: &'a mut [PairContact],
+) -> Vec<(
+    usize,
+    &'a mut [PairState],
+    &'a mut [bool],
+    &'a mut [PairContact],
+)> {
     let mut chunks = Vec::with_capacity(ends.len());
-    let mut rest = values;
     let mut start = 0;
     for &end in ends {
-        let (chunk, tail) = std::mem::take(&mut rest).split_at_mut(end - start);
-        chunks.push(chunk);
-        rest = tail;
+        let (state, states_rest) = std::mem::take(&mut states).split_at_mut(end - start);
+        let (active, actives_rest) = std::mem::take(&mut actives).split_at_mut(end - start);
+        let (record, records_rest) = std::mem::take(&mut records).split_at_mut(end - start);
+        chunks.push((start, state, active, record));
+        (states, actives, records) = (states_rest, actives_rest, records_rest);
         start = end;
     }
     chunks
