@@ -99,7 +99,7 @@ impl NeighborList {
         if strain == 0.0 {
             return 0.5 * self.skin;
         }
-        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        let max_reach = largest_reach(reach);
         0.5 * (self.skin - strain * (2.0 * max_reach + self.skin))
     }
 
@@ -163,7 +163,7 @@ impl NeighborList {
         if !self.start_build(centers, reach) {
             return;
         }
-        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        let max_reach = largest_reach(reach);
         let mut cell = (2.0 * max_reach + self.skin).max(f64::MIN_POSITIVE);
         let (mut lo, mut hi) = (centers[0], centers[0]);
         for c in centers {
@@ -264,7 +264,7 @@ impl NeighborList {
             *c = cell.reduced(*c);
         }
         self.reference_matrix = Some(cell.matrix());
-        let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+        let max_reach = largest_reach(reach);
         let range = (2.0 * max_reach + self.skin).max(f64::MIN_POSITIVE);
         let [width1, width2] = cell.widths();
         let cols = ((width1 / range) as usize).clamp(1, 1 << 15);
@@ -376,6 +376,17 @@ impl NeighborList {
                 second: entry & 1 == 1,
             })
     }
+}
+
+/// The largest of the bounding radii (0 for none), in parallel: max is exact, so the result
+/// does not depend on how the threads split the slice. A serial fold was a step's only serial
+/// pass over the grains while a box moves affinely.
+pub fn largest_reach(reach: &[f64]) -> f64 {
+    reach
+        .par_iter()
+        .with_min_len(8192)
+        .cloned()
+        .reduce(|| 0.0, f64::max)
 }
 
 /// One grain's end of a candidate pair `[i, j]`.

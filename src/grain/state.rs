@@ -80,21 +80,37 @@ impl Grain {
     /// `M_theta = m R^2 ((1+eps1)^2 + (1+eps2)^2) / 4`: the exact inertia of the ellipse.
     #[inline]
     pub fn rotational_inertia(&self, density: f64) -> f64 {
+        self.rotational_inertia_of_mass(self.mass(density))
+    }
+
+    /// [`Grain::rotational_inertia`] from the grain's mass, where the step has it at hand.
+    #[inline]
+    pub fn rotational_inertia_of_mass(&self, mass: f64) -> f64 {
         let (a, b) = (1.0 + self.eps1, 1.0 + self.eps2);
-        self.mass(density) * self.radius * self.radius * (a * a + b * b) / 4.0
+        mass * self.radius * self.radius * (a * a + b * b) / 4.0
     }
 
     /// `M_eps1 = M_eps2 = m R^2 / 4`.
     #[inline]
     pub fn strain_inertia(&self, density: f64) -> f64 {
-        self.mass(density) * self.radius * self.radius / 4.0
+        self.strain_inertia_of_mass(self.mass(density))
+    }
+
+    #[inline]
+    fn strain_inertia_of_mass(&self, mass: f64) -> f64 {
+        mass * self.radius * self.radius / 4.0
     }
 
     /// `M_alpha = m R^2 (eps1 - eps2)^2 / 2`.
     #[inline]
     pub fn alpha_inertia(&self, density: f64) -> f64 {
+        self.alpha_inertia_of_mass(self.mass(density))
+    }
+
+    #[inline]
+    fn alpha_inertia_of_mass(&self, mass: f64) -> f64 {
         let d = self.eps1 - self.eps2;
-        self.mass(density) * self.radius * self.radius * d * d / 2.0
+        mass * self.radius * self.radius * d * d / 2.0
     }
 
     /// Ellipse area `pi R^2 (1+eps1)(1+eps2)`, before the contact caps are removed.
@@ -164,8 +180,14 @@ impl Grain {
     /// Kinetic energy of all six degrees of freedom, with the deformation DoF's masses scaled by
     /// `deformation_mass_scale` (1: the grain's own inertia).
     pub fn kinetic_energy(&self, density: f64, deformation_mass_scale: f64) -> f64 {
-        let rigid_body = 0.5 * self.mass(density) * self.velocity.length_squared()
-            + 0.5 * self.rotational_inertia(density) * self.omega * self.omega;
+        self.kinetic_energy_of_mass(self.mass(density), deformation_mass_scale)
+    }
+
+    /// [`Grain::kinetic_energy`] from the grain's mass, where the step has it at hand.
+    #[inline]
+    pub fn kinetic_energy_of_mass(&self, mass: f64, deformation_mass_scale: f64) -> f64 {
+        let rigid_body = 0.5 * mass * self.velocity.length_squared()
+            + 0.5 * self.rotational_inertia_of_mass(mass) * self.omega * self.omega;
         // A grain whose deformation rates are zero (every rigid grain) would add +0 twice to a
         // sum that is >= +0: the same bits without the two terms.
         if self.eps1_rate == 0.0 && self.eps2_rate == 0.0 && self.alpha_rate == 0.0 {
@@ -174,10 +196,10 @@ impl Grain {
         // The masses the step integrates: M_eps and M_alpha times the deformation mass scale.
         rigid_body
             + 0.5
-                * (deformation_mass_scale * self.strain_inertia(density))
+                * (deformation_mass_scale * self.strain_inertia_of_mass(mass))
                 * (self.eps1_rate * self.eps1_rate + self.eps2_rate * self.eps2_rate)
             + 0.5
-                * (deformation_mass_scale * self.alpha_inertia(density))
+                * (deformation_mass_scale * self.alpha_inertia_of_mass(mass))
                 * self.alpha_rate
                 * self.alpha_rate
     }

@@ -567,7 +567,7 @@ impl World {
         let cell = self.cell();
         if let Some(cell) = &cell {
             // Checked every step: between rebuilds the cell keeps shrinking.
-            let max_reach = reach.iter().cloned().fold(0.0, f64::max);
+            let max_reach = crate::geometry::broadphase::largest_reach(reach);
             let range = 2.0 * max_reach + self.neighbors.skin;
             if cell.check_range(range).is_err() {
                 return Err(Instability::CellTooNarrow {
@@ -821,6 +821,11 @@ impl World {
             .enumerate()
             .map(|(chunk, (((grains, stresses), levels), wall_histories))| {
                 let mut sums = ChunkSums::default();
+                let first = chunk * GRAIN_CHUNK;
+                let near_wall = walls_in_reach(&frames[first..first + grains.len()], walls);
+                // Grains in the chunk have a wall to test, or a wall spring to drop.
+                let wall_work = near_wall.iter().any(|&near| near)
+                    || (0..walls.len()).any(|w| wall_friction[w] > 0.0);
                 for (k, (((grain, stress), level), wall_history)) in grains
                     .iter_mut()
                     .zip(stresses.iter_mut())
@@ -849,7 +854,8 @@ impl World {
                         load.add(force, c.point - center, cap);
                         load.contacts += 1;
                     }
-                    for (w, wall) in walls.iter().enumerate() {
+                    let chunk_walls = if wall_work { walls } else { &[] };
+                    for (w, wall) in chunk_walls.iter().enumerate() {
                         // A contact that is open this step drops its history. A wall without
                         // friction never has one: its row is left untouched, not rewritten
                         // with zeros every step.
@@ -859,7 +865,7 @@ impl World {
                             0.0
                         };
                         // Most grains are far from every wall: skip the call.
-                        if wall.height(frame.center) >= frame.bounding_radius {
+                        if !near_wall[w] || wall.height(frame.center) >= frame.bounding_radius {
                             continue;
                         }
                         let overlap = if frame.circle {
@@ -934,8 +940,7 @@ impl World {
                         sums.failure.get_or_insert(e);
                     }
                     sums.totals.grain_area += update.area;
-                    sums.totals.kinetic_energy += grain
-                        .kinetic_energy(params.material.density, params.deformation_mass_scale);
+                    sums.totals.kinetic_energy += update.kinetic_energy;
                     if cell.is_some() {
                         let m = grain.mass(params.material.density);
                         let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
@@ -1156,6 +1161,31 @@ fn prefetch<T>(value: &T) {
     let _ = value;
 }
 
+/// For each wall, whether a grain of `frames` (a chunk of the grain pass) may reach it: false
+/// when the box around the grains' bounding circles clears the wall, so that the grain pass
+/// tests no grain of the chunk against it. Nearly every chunk of a large sample is clear of
+/// every wall, and four tests a chunk replace four a grain.
+fn walls_in_reach(frames: &[Frame], walls: &[Wall]) -> [bool; MAX_WALLS] {
+    let mut near = [false; MAX_WALLS];
+    if walls.is_empty() || frames.is_empty() {
+        return near;
+    }
+    let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
+    // min and max pass a NaN over; the sum does not (nor an infinity), and a chunk with a
+    // value that is not finite has every wall tested, as before.
+    let mut sum = 0.0;
+    for frame in frames {
+        let reach = DVec2::splat(frame.bounding_radius);
+        lo = lo.min(frame.center - reach);
+        hi = hi.max(frame.center + reach);
+        sum += frame.center.x + frame.center.y + frame.bounding_radius;
+    }
+    for (near, wall) in near.iter_mut().zip(walls) {
+        *near = !sum.is_finite() || !wall.clears_box(lo, hi);
+    }
+    near
+}
+
 /// The sums a grain needs from its contacts.
 #[derive(Debug, Clone, Copy)]
 struct ContactLoad {
@@ -1197,6 +1227,8 @@ struct GrainUpdate {
     stress: GrainStress,
     area: f64,
     elastic_energy: f64,
+    /// After the update.
+    kinetic_energy: f64,
 }
 
 /// Stresses, accelerations and the symplectic Euler update of one grain (SPEC §3–§6).
@@ -1247,7 +1279,7 @@ fn advance_grain(
     if params.gravity != DVec2::ZERO {
         grain.velocity += params.gravity * dt;
     }
-    grain.omega += load.torque / grain.rotational_inertia(density) * dt;
+    grain.omega += load.torque / grain.rotational_inertia_of_mass(mass) * dt;
     grain.center += grain.velocity * dt;
     grain.theta += grain.omega * dt;
 
@@ -1321,6 +1353,7 @@ fn advance_grain(
         stress,
         area: current_area,
         elastic_energy,
+        kinetic_energy: grain.kinetic_energy_of_mass(mass, params.deformation_mass_scale),
     }
 }
 
@@ -1364,8 +1397,14 @@ fn check_grain(
         grain.alpha,
         grain.alpha_rate,
     ];
-    // Every value tested, without a branch per value: the common case is all finite.
-    if !values.iter().fold(true, |finite, v| finite & v.is_finite()) {
+    // The common case is all finite, and a sum is finite only if every term is (a NaN or an
+    // infinity makes it NaN or infinite): one test, summed as a tree so that the adds run side
+    // by side. Only a sum that is not finite (or that overflowed) has each value tested.
+    let sum = values
+        .chunks_exact(4)
+        .map(|q| (q[0] + q[1]) + (q[2] + q[3]))
+        .fold(0.0, |total, part| total + part);
+    if !sum.is_finite() && !values.iter().all(|v| v.is_finite()) {
         return Err(Instability::NonFinite { step, grain: index });
     }
     if grain.eps1 <= -1.0 || grain.eps2 <= -1.0 {
