@@ -19,13 +19,15 @@ pub struct NeighborList {
     pub skin: f64,
     /// Candidate pairs (i, j), i < j, sorted.
     pub pairs: Vec<[u32; 2]>,
-    /// For grain g, `grain_pairs[grain_offsets[g]..grain_offsets[g + 1]]` lists g's ends of
-    /// the pairs that contain it, in increasing pair order (see [`NeighborList::pairs_of`]).
-    grain_offsets: Vec<u32>,
-    /// Each entry `2 p + s`: the pair index p, and s = 1 where the grain is the pair's second.
-    /// The grain pass reads which end it holds from here instead of from `pairs[p]`, a load from
-    /// a scattered address per contact.
-    grain_pairs: Vec<u32>,
+    /// The pairs `[g, j]` of grain g are `pairs[first_pairs[g]..first_pairs[g + 1]]`: one run,
+    /// as the list is sorted.
+    first_pairs: Vec<u32>,
+    /// The pairs `[i, g]` of grain g (its ends as the second grain) are
+    /// `second_pairs[second_offsets[g]..second_offsets[g + 1]]`, pair indices in increasing
+    /// order. With the run above, they give g's pairs without reading `pairs` (see
+    /// [`NeighborList::pairs_of`]).
+    second_offsets: Vec<u32>,
+    second_pairs: Vec<u32>,
     /// Periodic cell only: for pair `[i, j]`, the image `n` of j that meets i (its centre is
     /// `x_j + H n`). Empty without a cell.
     pub images: Vec<[i64; 2]>,
@@ -183,10 +185,17 @@ impl NeighborList {
             let cy = (((c.y - lo.y) / cell) as usize).min(rows - 1);
             (cx, cy)
         };
-        let (cell_start, cell_grains) = sort_into_bins(n, cols * rows, |g| {
-            let (cx, cy) = cell_of(centers[g]);
-            cy * cols + cx
-        });
+        // Each grain's bin, in parallel: the divisions were most of the serial sort below.
+        let bin_of_grain: Vec<u32> = centers
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&c| {
+                let (cx, cy) = cell_of(c);
+                (cy * cols + cx) as u32
+            })
+            .collect();
+        let (cell_start, cell_grains) =
+            sort_into_bins(n, cols * rows, |g| bin_of_grain[g] as usize);
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order: two allocations a chunk, not one
         // a grain (they were a tenth of a build).
@@ -197,7 +206,8 @@ impl NeighborList {
                 let mut found = Vec::new();
                 for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
                     let ci = centers[i];
-                    let (cx, cy) = cell_of(ci);
+                    let bin = bin_of_grain[i] as usize;
+                    let (cx, cy) = (bin % cols, bin / cols);
                     found.clear();
                     for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
                         for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
@@ -240,9 +250,11 @@ impl NeighborList {
         self.affine_scale = DVec2::ONE;
         self.pairs.clear();
         self.images.clear();
-        self.grain_pairs.clear();
-        self.grain_offsets.clear();
-        self.grain_offsets.resize(n + 1, 0);
+        self.second_pairs.clear();
+        for offsets in [&mut self.first_pairs, &mut self.second_offsets] {
+            offsets.clear();
+            offsets.resize(n + 1, 0);
+        }
         n > 0
     }
 
@@ -327,7 +339,8 @@ impl NeighborList {
         self.index_pairs_by_grain(n);
     }
 
-    /// Fills `grain_offsets` and `grain_pairs` from `pairs`.
+    /// Fills `first_pairs`, `second_offsets` and `second_pairs` from `pairs`. Only the second
+    /// ends need a transposition (a pass that scatters): the first ends are runs of the list.
     fn index_pairs_by_grain(&mut self, n: usize) {
         assert!(
             self.pairs.len() < 1 << 31,
@@ -335,19 +348,19 @@ impl NeighborList {
             self.pairs.len()
         );
         for [i, j] in &self.pairs {
-            self.grain_offsets[*i as usize + 1] += 1;
-            self.grain_offsets[*j as usize + 1] += 1;
+            self.first_pairs[*i as usize + 1] += 1;
+            self.second_offsets[*j as usize + 1] += 1;
         }
         for g in 0..n {
-            self.grain_offsets[g + 1] += self.grain_offsets[g];
+            self.first_pairs[g + 1] += self.first_pairs[g];
+            self.second_offsets[g + 1] += self.second_offsets[g];
         }
-        self.grain_pairs.resize(self.grain_offsets[n] as usize, 0);
-        let mut fill: Vec<u32> = self.grain_offsets[..n].to_vec();
-        for (p, [i, j]) in self.pairs.iter().enumerate() {
-            for (side, g) in [*i as usize, *j as usize].into_iter().enumerate() {
-                self.grain_pairs[fill[g] as usize] = 2 * p as u32 + side as u32;
-                fill[g] += 1;
-            }
+        self.second_pairs.resize(self.pairs.len(), 0);
+        let mut fill: Vec<u32> = self.second_offsets[..n].to_vec();
+        for (p, [_, j]) in self.pairs.iter().enumerate() {
+            let slot = &mut fill[*j as usize];
+            self.second_pairs[*slot as usize] = p as u32;
+            *slot += 1;
         }
     }
 
@@ -366,15 +379,22 @@ impl NeighborList {
             });
     }
 
-    /// Grain g's ends of the pairs that contain it, in increasing pair order.
+    /// Grain g's ends of the pairs that contain it, in increasing pair order: its pairs
+    /// `[i, g]` (i < g) come before its pairs `[g, j]` in the sorted list.
     #[inline]
-    pub fn pairs_of(&self, g: usize) -> impl ExactSizeIterator<Item = PairEnd> + '_ {
-        self.grain_pairs[self.grain_offsets[g] as usize..self.grain_offsets[g + 1] as usize]
+    pub fn pairs_of(&self, g: usize) -> impl Iterator<Item = PairEnd> + '_ {
+        let seconds = self.second_pairs
+            [self.second_offsets[g] as usize..self.second_offsets[g + 1] as usize]
             .iter()
-            .map(|&entry| PairEnd {
-                pair: (entry >> 1) as usize,
-                second: entry & 1 == 1,
-            })
+            .map(|&pair| PairEnd {
+                pair: pair as usize,
+                second: true,
+            });
+        let firsts = (self.first_pairs[g]..self.first_pairs[g + 1]).map(|pair| PairEnd {
+            pair: pair as usize,
+            second: false,
+        });
+        seconds.chain(firsts)
     }
 }
 
@@ -442,10 +462,19 @@ mod tests {
             }
         }
         assert_eq!(list.pairs, brute);
+        // Each grain's ends: exactly the pairs that hold it, in increasing pair order.
         for g in 0..500 {
-            for end in list.pairs_of(g) {
-                assert_eq!(list.pairs[end.pair][end.second as usize], g as u32);
-            }
+            let ends: Vec<PairEnd> = list.pairs_of(g).collect();
+            let expected: Vec<PairEnd> = (0..brute.len())
+                .filter_map(|p| {
+                    let [i, j] = brute[p];
+                    (i as usize == g || j as usize == g).then_some(PairEnd {
+                        pair: p,
+                        second: j as usize == g,
+                    })
+                })
+                .collect();
+            assert_eq!(ends, expected, "grain {g}");
         }
         assert!(!list.needs_rebuild(&centers, &reach));
         let mut moved = centers.clone();

@@ -591,25 +591,35 @@ impl World {
                 None => self.neighbors.build(centers, reach),
             }
             // Pair indices change with the list: carry each surviving pair's state over.
-            // Both lists are sorted by (i, j), so each chunk of the new list merges with the
-            // old one from where its first pair would be: a parallel pass, where a serial
-            // merge was the largest part of a rebuild that a second thread could not share.
+            // Both lists are sorted by (i, j), so the new list merges with the old one: each
+            // parallel task keeps its place in the old list from one pair to the next (its
+            // pairs come in increasing order) and finds it by bisection at its first pair, or
+            // whenever the order breaks. The states are written in place, in parallel: a
+            // vector filled with defaults first was a serial pass over every pair.
             let pairs = &self.neighbors.pairs;
-            let mut state = vec![PairState::default(); pairs.len()];
-            state
-                .par_chunks_mut(PAIR_CHUNK)
-                .zip(pairs.par_chunks(PAIR_CHUNK))
-                .for_each(|(slots, chunk_pairs)| {
-                    let mut k = old_pairs.partition_point(|old| *old < chunk_pairs[0]);
-                    for (slot, pair) in slots.iter_mut().zip(chunk_pairs) {
+            let mut state = Vec::new();
+            pairs
+                .par_iter()
+                .with_min_len(PAIR_CHUNK)
+                .map_init(
+                    || None::<([u32; 2], usize)>,
+                    |place, pair| {
+                        let mut k = match *place {
+                            Some((last, k)) if last <= *pair => k,
+                            _ => old_pairs.partition_point(|old| old < pair),
+                        };
                         while k < old_pairs.len() && old_pairs[k] < *pair {
                             k += 1;
                         }
+                        *place = Some((*pair, k));
                         if k < old_pairs.len() && old_pairs[k] == *pair {
-                            *slot = old_state[k];
+                            old_state[k]
+                        } else {
+                            PairState::default()
                         }
-                    }
-                });
+                    },
+                )
+                .collect_into_vec(&mut state);
             self.pair_state = state;
             // The pair pass writes every flag, and a record wherever a flag is set, before
             // anything reads them.
