@@ -379,19 +379,28 @@ impl NeighborList {
             });
     }
 
+    /// The pairs `[i, g]` that hold grain g as their second grain, in increasing order.
+    #[inline]
+    pub fn second_ends_of(&self, g: usize) -> &[u32] {
+        &self.second_pairs[self.second_offsets[g] as usize..self.second_offsets[g + 1] as usize]
+    }
+
+    /// The pairs `[g, j]` that hold grain g as their first grain: a run of the list.
+    #[inline]
+    pub fn first_ends_of(&self, g: usize) -> std::ops::Range<usize> {
+        self.first_pairs[g] as usize..self.first_pairs[g + 1] as usize
+    }
+
     /// Grain g's ends of the pairs that contain it, in increasing pair order: its pairs
     /// `[i, g]` (i < g) come before its pairs `[g, j]` in the sorted list.
     #[inline]
     pub fn pairs_of(&self, g: usize) -> impl Iterator<Item = PairEnd> + '_ {
-        let seconds = self.second_pairs
-            [self.second_offsets[g] as usize..self.second_offsets[g + 1] as usize]
-            .iter()
-            .map(|&pair| PairEnd {
-                pair: pair as usize,
-                second: true,
-            });
-        let firsts = (self.first_pairs[g]..self.first_pairs[g + 1]).map(|pair| PairEnd {
+        let seconds = self.second_ends_of(g).iter().map(|&pair| PairEnd {
             pair: pair as usize,
+            second: true,
+        });
+        let firsts = self.first_ends_of(g).map(|pair| PairEnd {
+            pair,
             second: false,
         });
         seconds.chain(firsts)

@@ -846,22 +846,33 @@ impl World {
                     let g = chunk * GRAIN_CHUNK + k;
                     let frame = &frames[g];
                     let mut load = ContactLoad::default();
-                    for end in neighbors.pairs_of(g) {
-                        if !pair_active[end.pair] {
+                    // In increasing pair order (the order of the sums): the pairs [i, g]
+                    // come before the pairs [g, j]. Two plain loops: one iterator chaining
+                    // the two cost 44 instructions a grain in the gas.
+                    for &pair in neighbors.second_ends_of(g) {
+                        let pair = pair as usize;
+                        if !pair_active[pair] {
                             continue;
                         }
-                        let c = &pair_contacts[end.pair];
-                        let (force, cap, center) = if !end.second {
-                            (c.force_on_first(), c.cap_area_first, frame.center)
-                        } else {
-                            // The contact point lies at the image of this grain that met the first.
-                            let image = match &cell {
-                                Some(cell) => cell.image_shift(neighbors.images[end.pair]),
-                                None => DVec2::ZERO,
-                            };
-                            (-c.force_on_first(), c.cap_area_second, frame.center + image)
+                        let c = &pair_contacts[pair];
+                        // The contact point lies at the image of this grain that met the first.
+                        let image = match &cell {
+                            Some(cell) => cell.image_shift(neighbors.images[pair]),
+                            None => DVec2::ZERO,
                         };
-                        load.add(force, c.point - center, cap);
+                        load.add(
+                            -c.force_on_first(),
+                            c.point - (frame.center + image),
+                            c.cap_area_second,
+                        );
+                        load.contacts += 1;
+                    }
+                    for pair in neighbors.first_ends_of(g) {
+                        if !pair_active[pair] {
+                            continue;
+                        }
+                        let c = &pair_contacts[pair];
+                        load.add(c.force_on_first(), c.point - frame.center, c.cap_area_first);
                         load.contacts += 1;
                     }
                     let chunk_walls = if wall_work { walls } else { &[] };
