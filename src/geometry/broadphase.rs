@@ -19,9 +19,9 @@ pub struct NeighborList {
     pub skin: f64,
     /// Candidate pairs (i, j), i < j, sorted.
     pub pairs: Vec<[u32; 2]>,
-    /// The pairs `[g, j]` of grain g are `pairs[first_pairs[g]..first_pairs[g + 1]]`: one run,
-    /// as the list is sorted.
-    first_pairs: Vec<u32>,
+    /// The pairs `[g, j]` of grain g are `pairs[first_offsets[g]..first_offsets[g + 1]]`: one
+    /// run, as the list is sorted.
+    first_offsets: Vec<u32>,
     /// The pairs `[i, g]` of grain g (its ends as the second grain) are
     /// `second_pairs[second_offsets[g]..second_offsets[g + 1]]`, pair indices in increasing
     /// order. With the run above, they give g's pairs without reading `pairs` (see
@@ -251,7 +251,7 @@ impl NeighborList {
         self.pairs.clear();
         self.images.clear();
         self.second_pairs.clear();
-        for offsets in [&mut self.first_pairs, &mut self.second_offsets] {
+        for offsets in [&mut self.first_offsets, &mut self.second_offsets] {
             offsets.clear();
             offsets.resize(n + 1, 0);
         }
@@ -339,7 +339,7 @@ impl NeighborList {
         self.index_pairs_by_grain(n);
     }
 
-    /// Fills `first_pairs`, `second_offsets` and `second_pairs` from `pairs`. Only the second
+    /// Fills `first_offsets`, `second_offsets` and `second_pairs` from `pairs`. Only the second
     /// ends need a transposition (a pass that scatters): the first ends are runs of the list.
     fn index_pairs_by_grain(&mut self, n: usize) {
         assert!(
@@ -348,11 +348,11 @@ impl NeighborList {
             self.pairs.len()
         );
         for [i, j] in &self.pairs {
-            self.first_pairs[*i as usize + 1] += 1;
+            self.first_offsets[*i as usize + 1] += 1;
             self.second_offsets[*j as usize + 1] += 1;
         }
         for g in 0..n {
-            self.first_pairs[g + 1] += self.first_pairs[g];
+            self.first_offsets[g + 1] += self.first_offsets[g];
             self.second_offsets[g + 1] += self.second_offsets[g];
         }
         self.second_pairs.resize(self.pairs.len(), 0);
@@ -388,7 +388,7 @@ impl NeighborList {
     /// The pairs `[g, j]` that hold grain g as their first grain: a run of the list.
     #[inline]
     pub fn first_ends_of(&self, g: usize) -> std::ops::Range<usize> {
-        self.first_pairs[g] as usize..self.first_pairs[g + 1] as usize
+        self.first_offsets[g] as usize..self.first_offsets[g + 1] as usize
     }
 
     /// Grain g's ends of the pairs that contain it, in increasing pair order: its pairs
