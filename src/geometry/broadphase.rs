@@ -24,8 +24,8 @@ pub struct NeighborList {
     first_offsets: Vec<u32>,
     /// The pairs `[i, g]` of grain g (its ends as the second grain) are
     /// `second_pairs[second_offsets[g]..second_offsets[g + 1]]`, pair indices in increasing
-    /// order. With the run above, they give g's pairs without reading `pairs` (see
-    /// [`NeighborList::pairs_of`]).
+    /// order. With the run above, they give g's pairs without reading `pairs`; in the sorted
+    /// list all of them come before the run.
     second_offsets: Vec<u32>,
     second_pairs: Vec<u32>,
     /// Periodic cell only: for pair `[i, j]`, the image `n` of j that meets i (its centre is
@@ -390,21 +390,6 @@ impl NeighborList {
     pub fn first_ends_of(&self, g: usize) -> std::ops::Range<usize> {
         self.first_offsets[g] as usize..self.first_offsets[g + 1] as usize
     }
-
-    /// Grain g's ends of the pairs that contain it, in increasing pair order: its pairs
-    /// `[i, g]` (i < g) come before its pairs `[g, j]` in the sorted list.
-    #[inline]
-    pub fn pairs_of(&self, g: usize) -> impl Iterator<Item = PairEnd> + '_ {
-        let seconds = self.second_ends_of(g).iter().map(|&pair| PairEnd {
-            pair: pair as usize,
-            second: true,
-        });
-        let firsts = self.first_ends_of(g).map(|pair| PairEnd {
-            pair,
-            second: false,
-        });
-        seconds.chain(firsts)
-    }
 }
 
 /// The largest of the bounding radii (0 for none), in parallel: max is exact, so the result
@@ -416,15 +401,6 @@ pub fn largest_reach(reach: &[f64]) -> f64 {
         .with_min_len(8192)
         .cloned()
         .reduce(|| 0.0, f64::max)
-}
-
-/// One grain's end of a candidate pair `[i, j]`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PairEnd {
-    /// The pair's index in [`NeighborList::pairs`].
-    pub pair: usize,
-    /// The grain is the pair's second, j.
-    pub second: bool,
 }
 
 /// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
@@ -471,19 +447,21 @@ mod tests {
             }
         }
         assert_eq!(list.pairs, brute);
-        // Each grain's ends: exactly the pairs that hold it, in increasing pair order.
+        // Each grain's ends: exactly the pairs that hold it as second grain, then as first,
+        // each in increasing pair order.
         for g in 0..500 {
-            let ends: Vec<PairEnd> = list.pairs_of(g).collect();
-            let expected: Vec<PairEnd> = (0..brute.len())
-                .filter_map(|p| {
-                    let [i, j] = brute[p];
-                    (i as usize == g || j as usize == g).then_some(PairEnd {
-                        pair: p,
-                        second: j as usize == g,
-                    })
-                })
-                .collect();
-            assert_eq!(ends, expected, "grain {g}");
+            let holding = |end: usize| -> Vec<usize> {
+                (0..brute.len())
+                    .filter(|&p| brute[p][end] as usize == g)
+                    .collect()
+            };
+            let seconds: Vec<usize> = list.second_ends_of(g).iter().map(|&p| p as usize).collect();
+            assert_eq!(seconds, holding(1), "grain {g} as second");
+            assert_eq!(
+                list.first_ends_of(g).collect::<Vec<_>>(),
+                holding(0),
+                "grain {g} as first"
+            );
         }
         assert!(!list.needs_rebuild(&centers, &reach));
         let mut moved = centers.clone();
