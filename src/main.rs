@@ -385,10 +385,18 @@ fn run(cli: Cli) -> Result<()> {
                 out_dir.display()
             );
             if let Some(a) = parsed.parameters().adaptive {
-                eprintln!(
-                    "sdem: adaptive model level: dt = {:.3e} while every grain is rigid, {:.3e} once one deforms",
-                    a.dt[0], a.dt[2]
-                );
+                if a.dt[1] == a.dt[0] {
+                    // Incompressible grains: the volumetric level takes the rigid step.
+                    eprintln!(
+                        "sdem: adaptive model level: dt = {:.3e} while no grain is at the full level, {:.3e} once one is",
+                        a.dt[0], a.dt[2]
+                    );
+                } else {
+                    eprintln!(
+                        "sdem: adaptive model level: dt = {:.3e} while every grain is rigid, {:.3e} once one deforms",
+                        a.dt[0], a.dt[2]
+                    );
+                }
             }
             // On a terminal: a progress bar (after a few seconds); otherwise a line every 30 s.
             let terminal = std::io::stderr().is_terminal();

@@ -311,3 +311,60 @@ fn frictional_contacts_are_stable_below_their_critical_estimate_and_stopped_abov
         );
     }
 }
+
+/// The dense bench packing with every grain at `level`, at `fraction` of the critical estimate
+/// of `estimate_level`, run for `steps` steps.
+fn dense_run_at_level(
+    level: ModelLevel,
+    estimate_level: ModelLevel,
+    fraction: f64,
+    steps: usize,
+) -> Result<World, Instability> {
+    let mut world = dense_packing(400, 1.0);
+    world.params.level = level;
+    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
+    world.set_levels(&levels);
+    let p = &world.params;
+    world.params.dt =
+        fraction * critical_time_step(&p.material, &p.law, 0.5 * 0.024, estimate_level);
+    for _ in 0..steps {
+        world.step()?;
+    }
+    Ok(world)
+}
+
+#[test]
+fn incompressible_volumetric_grains_take_the_rigid_step_stably_and_are_stopped_above_it() {
+    // Expectation (has_dynamic_strains, SPEC §6): at nu = 0.5 the volume correction sets a
+    // volumetric grain's mean strain from its lost area after every step, so no contact force
+    // drives a strain DoF and the grain's stiffest mode is a rigid grain's contact mode. The
+    // estimate is the rigid one; 0.8 of it relaxes the dense packing (the grains' areas held by
+    // the correction while their radii grow), 2.0 of it is stopped by a diagnostic. Full grains,
+    // whose strains the contacts do drive, are stopped at that same 0.8 (measured: within 4
+    // steps), so the test tells the two levels apart.
+    let world = dense_packing(400, 1.0);
+    let p = &world.params;
+    assert!(
+        p.material.poisson >= 0.5,
+        "the bench packing is incompressible"
+    );
+    let volumetric = critical_time_step(&p.material, &p.law, 0.012, ModelLevel::Volumetric);
+    let rigid = critical_time_step(&p.material, &p.law, 0.012, ModelLevel::Rigid);
+    assert_eq!(volumetric.to_bits(), rigid.to_bits());
+    let relaxed = dense_run_at_level(ModelLevel::Volumetric, ModelLevel::Rigid, 0.8, 3000)
+        .expect("volumetric grains stable at 0.8 of the rigid estimate");
+    // The packing stays packed: about 2.3 contacts a grain, as rigid grains keep (measured).
+    assert!(relaxed.totals.contacts > 2 * relaxed.grains.len() as u64);
+    let swollen = relaxed.grains.iter().filter(|g| g.eps1 > 1e-6).count();
+    assert!(
+        swollen > relaxed.grains.len() / 2,
+        "the volume correction swelled only {swollen} grains"
+    );
+    assert!(relaxed.grains.iter().all(|g| g.eps1 == g.eps2));
+    let err = dense_run_at_level(ModelLevel::Volumetric, ModelLevel::Rigid, 2.0, 3000)
+        .expect_err("volumetric grains unstable at twice the rigid estimate");
+    assert!(!matches!(err, Instability::NonFinite { .. }), "{err}");
+    let full = dense_run_at_level(ModelLevel::Full, ModelLevel::Rigid, 0.8, 3000)
+        .expect_err("full grains unstable at 0.8 of the rigid estimate");
+    assert!(!matches!(full, Instability::NonFinite { .. }), "{full}");
+}

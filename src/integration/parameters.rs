@@ -177,6 +177,21 @@ pub struct StiffestModes {
     pub tangential: f64,
 }
 
+/// Whether a grain at `level` has strain DoF that contact forces drive through their own
+/// inertia. A rigid grain has none; nor has a volumetric grain of an incompressible material:
+/// it holds its deviator, and the volume correction (SPEC §6) sets its mean strain from its
+/// lost area after every step, so no force accelerates a strain. Its stiffest modes are a rigid
+/// grain's: measured on the dense `sdem bench` packing, all grains volumetric at nu = 0.5 run
+/// stable at 0.8 of the rigid estimate and go unstable at 0.9 (rigid grains: 0.9 and 1.0;
+/// tests/stability.rs).
+pub fn has_dynamic_strains(material: &Material, level: ModelLevel) -> bool {
+    match level {
+        ModelLevel::Rigid => false,
+        ModelLevel::Volumetric => !material.is_incompressible(),
+        ModelLevel::Full => true,
+    }
+}
+
 pub fn stiffest_modes(
     material: &Material,
     law: &SecantLaw,
@@ -185,11 +200,12 @@ pub fn stiffest_modes(
     settings: ModeSettings,
 ) -> StiffestModes {
     let mass = material.density * std::f64::consts::PI * radius * radius;
+    let dynamic_strains = has_dynamic_strains(material, level);
     // Response of the strain DoF to a contact force, relative to the translational one.
-    let strain_coupling = if level == ModelLevel::Rigid {
-        0.0
-    } else {
+    let strain_coupling = if dynamic_strains {
         4.0 / settings.deformation_mass_scale
+    } else {
+        0.0
     };
     let coupling = 1.0 + strain_coupling;
     let contact = (4.0 * law.initial_stiffness() * 2.0 / mass * coupling).sqrt();
@@ -197,7 +213,7 @@ pub fn stiffest_modes(
     let tangential = (4.0 * settings.tangential_ratio * law.initial_stiffness() * 2.0 / mass
         * tangential_coupling)
         .sqrt();
-    let deformation = if level == ModelLevel::Rigid {
+    let deformation = if !dynamic_strains {
         0.0
     } else {
         2.0 / radius
