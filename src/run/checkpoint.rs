@@ -676,7 +676,7 @@ impl Checkpoint {
 
     /// Writes atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the directory.
     pub fn write_atomic(&self, path: &Path) -> std::io::Result<()> {
-        write_atomic(path, &self.to_bytes())
+        write_encoded_atomic(path, SDEM_FORMAT_VERSION, &self.to_stored())
     }
 }
 
@@ -801,6 +801,71 @@ pub(crate) fn encode(version: u32, stored: &impl Serialize) -> Vec<u8> {
     framed(version, payload.into_bytes())
 }
 
+/// Writes the file of format `version` whose payload is `stored` in RON to `path`, atomically
+/// (see [`write_atomic`]), with the same bytes as [`encode`] but without holding them: the
+/// payload streams to the file through its checksum, and the header's length and checksum are
+/// written over their placeholders at the end. At 10⁵ grains the payload is some 30 MB of
+/// text, which the run held twice (the text, and the file's bytes) on top of its own state.
+pub(crate) fn write_encoded_atomic(
+    path: &Path,
+    version: u32,
+    stored: &impl Serialize,
+) -> std::io::Result<()> {
+    use std::io::{Seek, SeekFrom};
+    write_atomic(path, |file| {
+        let mut out = std::io::BufWriter::new(file);
+        out.write_all(MAGIC)?;
+        out.write_all(&version.to_le_bytes())?;
+        // Length and checksum, filled in once the payload is written.
+        out.write_all(&[0; 12])?;
+        let mut payload = Checksummed::new(&mut out);
+        ron::Options::default()
+            .to_io_writer(&mut payload, stored)
+            .map_err(std::io::Error::other)?;
+        let (length, crc) = payload.finish();
+        let file = out.into_inner().map_err(|e| e.into_error())?;
+        file.seek(SeekFrom::Start(MAGIC.len() as u64 + 4))?;
+        file.write_all(&length.to_le_bytes())?;
+        file.write_all(&crc.to_le_bytes())?;
+        Ok(())
+    })
+}
+
+/// A writer that passes bytes on and keeps their count and CRC-32 (as [`crc32`] of them all).
+struct Checksummed<W> {
+    inner: W,
+    length: u64,
+    crc: Crc32,
+}
+
+impl<W: Write> Checksummed<W> {
+    fn new(inner: W) -> Self {
+        Self {
+            inner,
+            length: 0,
+            crc: Crc32::new(),
+        }
+    }
+
+    /// The count and checksum of the bytes written.
+    fn finish(self) -> (u64, u32) {
+        (self.length, self.crc.value())
+    }
+}
+
+impl<W: Write> Write for Checksummed<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        self.length += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
 /// Header and payload: the bytes of a file.
 fn framed(version: u32, payload: Vec<u8>) -> Vec<u8> {
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
@@ -861,12 +926,15 @@ fn unframe<'b>(bytes: &'b [u8], path: &str) -> Result<(u32, &'b [u8]), Checkpoin
     Ok((version, payload))
 }
 
-/// Writes `bytes` to `path` atomically: `<path>.tmp`, fsync, rename over `path`, fsync of the
-/// directory.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+/// Writes to `path` atomically what `write` writes to the file: `<path>.tmp`, fsync, rename
+/// over `path`, fsync of the directory.
+fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let tmp = tmp_path(path);
     let written = std::fs::File::create(&tmp).and_then(|mut f| {
-        f.write_all(bytes)?;
+        write(&mut f)?;
         f.sync_all()
     });
     if let Err(e) = written {
@@ -895,8 +963,41 @@ fn tmp_path(path: &Path) -> PathBuf {
 
 /// CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320).
 pub fn crc32(data: &[u8]) -> u32 {
+    let mut crc = Crc32::new();
+    crc.update(data);
+    crc.value()
+}
+
+/// A CRC-32 (as [`crc32`]) computed over bytes given piece by piece.
+struct Crc32 {
+    state: u32,
+    table: &'static [u32; 256],
+}
+
+impl Crc32 {
+    fn new() -> Self {
+        Self {
+            state: !0u32,
+            table: crc32_table(),
+        }
+    }
+
+    fn update(&mut self, data: &[u8]) {
+        let mut crc = self.state;
+        for &b in data {
+            crc = self.table[((crc ^ b as u32) & 0xff) as usize] ^ (crc >> 8);
+        }
+        self.state = crc;
+    }
+
+    fn value(&self) -> u32 {
+        !self.state
+    }
+}
+
+fn crc32_table() -> &'static [u32; 256] {
     static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
-    let table = TABLE.get_or_init(|| {
+    TABLE.get_or_init(|| {
         let mut t = [0u32; 256];
         for (i, e) in t.iter_mut().enumerate() {
             let mut c = i as u32;
@@ -910,12 +1011,7 @@ pub fn crc32(data: &[u8]) -> u32 {
             *e = c;
         }
         t
-    });
-    let mut crc = !0u32;
-    for &b in data {
-        crc = table[((crc ^ b as u32) & 0xff) as usize] ^ (crc >> 8);
-    }
-    !crc
+    })
 }
 
 #[cfg(test)]
@@ -925,5 +1021,26 @@ mod tests {
     #[test]
     fn crc32_check_value() {
         assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        // Piece by piece, the same value.
+        let mut crc = Crc32::new();
+        for piece in [&b"1234"[..], b"", b"56789"] {
+            crc.update(piece);
+        }
+        assert_eq!(crc.value(), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn a_streamed_file_has_the_bytes_of_the_encoded_one() {
+        // Expectation: write_encoded_atomic is encode's bytes, header included, whatever
+        // size the buffered writer splits the payload into (here larger than its buffer).
+        let stored: Vec<(u64, String)> = (0..5000).map(|k| (k * k, format!("grain {k}"))).collect();
+        let dir = std::env::temp_dir().join(format!("sdem-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("c.bin");
+        write_encoded_atomic(&path, 7, &stored).unwrap();
+        let written = std::fs::read(&path).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(written.len() > 8192 + HEADER_LEN);
+        assert_eq!(written, encode(7, &stored));
     }
 }

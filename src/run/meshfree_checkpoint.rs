@@ -16,7 +16,7 @@
 
 use super::checkpoint::{
     AnyCheckpoint, Bits, CheckpointError, FORMAT_VERSION, GrainBits, JammingBits, Payload,
-    ProgramBits, WallBits, encode, read_file, write_atomic,
+    ProgramBits, WallBits, encode, read_file, write_encoded_atomic,
 };
 use super::meshfree::Meshfree;
 use super::simulation::{RunRecord, Simulation};
@@ -648,7 +648,11 @@ impl MeshfreeCheckpoint {
 
     /// Writes atomically (see [`super::checkpoint::Checkpoint::write_atomic`]).
     pub fn write_atomic(&self, path: &Path) -> std::io::Result<()> {
-        write_atomic(path, &self.to_bytes())
+        write_encoded_atomic(
+            path,
+            FORMAT_VERSION,
+            &Payload::Meshfree(Box::new(self.to_stored())),
+        )
     }
 }
 
