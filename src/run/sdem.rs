@@ -12,7 +12,6 @@ use crate::output::frame::Frame;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
 use crate::output::{Measures, write_grains_csv};
 use crate::scenario::Scenario;
-use glam::DVec2;
 use std::path::Path;
 
 /// The `macro.csv` columns of a periodic cell after the common ones (whose `sxx_c`, `syy_c`
@@ -133,11 +132,11 @@ impl Simulation for Sdem {
         }
     }
 
-    /// In a periodic cell the grains follow the cell at every step already.
-    fn remap_affine(&mut self, (lo, hi): (DVec2, DVec2), (to_lo, to_hi): (DVec2, DVec2)) {
-        if self.world.periodic.is_none() {
-            self.world.remap_affine(lo, hi, to_lo, to_hi);
-        }
+    /// The world's grain pass carries the grains with the box ([`World::affine_carry`]); in a
+    /// periodic cell they follow the cell at every step already.
+    fn carry_affine_in_step(&mut self, affine: bool) -> bool {
+        self.world.affine_carry = affine;
+        true
     }
 
     fn set_shear_rate(&mut self, rate: f64) {

@@ -106,6 +106,14 @@ pub trait Simulation {
         let _ = (from, to);
     }
 
+    /// Whether the next step is in an affine phase (`affine`); returns true when the solver
+    /// then carries its grains with the box inside the step itself, so that the run loop does
+    /// not [`remap_affine`](Self::remap_affine) after it. The default: it does not.
+    fn carry_affine_in_step(&mut self, affine: bool) -> bool {
+        let _ = affine;
+        false
+    }
+
     /// The shear rate `L_xy` of a periodic cell for the next step, as the loading program set
     /// it. The default ignores it (a solver without a periodic cell: the scenario refuses
     /// shear phases there).

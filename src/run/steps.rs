@@ -217,7 +217,9 @@ impl<'a> Run<'a> {
         state: &LoopState,
         phase_name: &str,
     ) -> Result<(), RunError> {
-        let box_before = program.affine().then(|| box_corners(sim.walls()));
+        let affine = program.affine();
+        let carried = sim.carry_affine_in_step(affine);
+        let box_before = (affine && !carried).then(|| box_corners(sim.walls()));
         if let Err(failure) = sim.take_step() {
             let note = match program.phase().and_then(stress_target) {
                 Some(target) => format!(
