@@ -134,9 +134,8 @@ impl Simulation for Sdem {
 
     /// The world's grain pass carries the grains with the box ([`World::affine_carry`]); in a
     /// periodic cell they follow the cell at every step already.
-    fn carry_affine_in_step(&mut self, affine: bool) -> bool {
+    fn set_affine_carry(&mut self, affine: bool) {
         self.world.affine_carry = affine;
-        true
     }
 
     fn set_shear_rate(&mut self, rate: f64) {

@@ -8,7 +8,6 @@ use crate::output::Measures;
 use crate::output::frame::Frame;
 use crate::output::mcap::{ContinueFrom, McapSettings, TrajectoryWriter, WriteError};
 use crate::scenario::Scenario;
-use glam::DVec2;
 use std::path::Path;
 
 /// A solver as the run loop ([`super::run_loop`]) drives it: a box of grains between four
@@ -34,8 +33,9 @@ use std::path::Path;
 ///    [`time`](Self::time)). On failure the loop writes the last good state
 ///    ([`write_last_good`](Self::write_last_good)) and ends the run with
 ///    [`failure_error`](Self::failure_error).
-/// 3. In an affine phase, [`remap_affine`](Self::remap_affine) from the box before the step
-///    to the box after it.
+/// 3. In an affine phase (told before the step by [`set_affine_carry`](Self::set_affine_carry))
+///    the step itself has carried the grains with the box, from the box before the step to
+///    the box after it.
 /// 4. [`load_state`](Self::load_state) again, and [`coordination`](Self::coordination) when
 ///    the mean stress first rises above the jamming pressure.
 /// 5. On output steps: [`measures`](Self::measures) (a `macro.csv` row, plus the solver's
@@ -99,19 +99,11 @@ pub trait Simulation {
         }
     }
 
-    /// An affine phase moves the grains with the box: maps the grain positions from the box
-    /// with corners `from` (lower left, upper right) to the box `to`. The default does nothing
-    /// (a solver whose grains follow the walls through contact only).
-    fn remap_affine(&mut self, from: (DVec2, DVec2), to: (DVec2, DVec2)) {
-        let _ = (from, to);
-    }
-
-    /// Whether the next step is in an affine phase (`affine`); returns true when the solver
-    /// then carries its grains with the box inside the step itself, so that the run loop does
-    /// not [`remap_affine`](Self::remap_affine) after it. The default: it does not.
-    fn carry_affine_in_step(&mut self, affine: bool) -> bool {
+    /// Whether the next step is in an affine phase: the step then moves the grains with the
+    /// box, as the walls move over it (the affine part of the compression). The default
+    /// ignores it (a solver whose grains follow the walls through contact only).
+    fn set_affine_carry(&mut self, affine: bool) {
         let _ = affine;
-        false
     }
 
     /// The shear rate `L_xy` of a periodic cell for the next step, as the loading program set

@@ -13,7 +13,6 @@ use crate::output::reference::CantorReference;
 use crate::output::vtk::{VtkOptions, VtkWriter};
 use crate::output::{MacroWriter, Measures};
 use crate::scenario::Scenario;
-use glam::DVec2;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -217,9 +216,7 @@ impl<'a> Run<'a> {
         state: &LoopState,
         phase_name: &str,
     ) -> Result<(), RunError> {
-        let affine = program.affine();
-        let carried = sim.carry_affine_in_step(affine);
-        let box_before = (affine && !carried).then(|| box_corners(sim.walls()));
+        sim.set_affine_carry(program.affine());
         if let Err(failure) = sim.take_step() {
             let note = match program.phase().and_then(stress_target) {
                 Some(target) => format!(
@@ -240,9 +237,6 @@ impl<'a> Run<'a> {
                     state_file,
                 },
             ));
-        }
-        if let Some(from) = box_before {
-            sim.remap_affine(from, box_corners(sim.walls()));
         }
         Ok(())
     }
@@ -584,12 +578,4 @@ fn stalled(walls: &[Wall], state: &LoadState, conserved_area: Option<f64>) -> Op
         ));
     }
     None
-}
-
-/// Lower-left and upper-right corners of the box made by the four walls.
-fn box_corners(walls: &[Wall]) -> (DVec2, DVec2) {
-    (
-        DVec2::new(walls[LEFT].point.x, walls[BOTTOM].point.y),
-        DVec2::new(walls[RIGHT].point.x, walls[TOP].point.y),
-    )
 }
