@@ -15,10 +15,24 @@ fn dense_run(fraction: f64, steps: usize) -> Result<World, Instability> {
     let mut world = dense_packing(400, 1.0);
     let p = &world.params;
     world.params.dt = fraction * critical_time_step(&p.material, &p.law, 0.5 * 0.024, p.level);
+    run_for(world, steps)
+}
+
+/// Runs `world` for `steps` steps; the first instability stops it.
+fn run_for(mut world: World, steps: usize) -> Result<World, Instability> {
     for _ in 0..steps {
         world.step()?;
     }
     Ok(world)
+}
+
+/// The dense bench packing with every grain at model `level`.
+fn dense_packing_at(level: ModelLevel) -> World {
+    let mut world = dense_packing(400, 1.0);
+    world.params.level = level;
+    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
+    world.set_levels(&levels);
+    world
 }
 
 /// [`dense_run`] with the deformation masses scaled by `mass_scale` and the time step `dt`.
@@ -26,10 +40,7 @@ fn dense_run_mass_scaled(mass_scale: f64, dt: f64, steps: usize) -> Result<World
     let mut world = dense_packing(400, 1.0);
     world.params.deformation_mass_scale = mass_scale;
     world.params.dt = dt;
-    for _ in 0..steps {
-        world.step()?;
-    }
-    Ok(world)
+    run_for(world, steps)
 }
 
 #[test]
@@ -280,16 +291,10 @@ fn frictional_dense_run(
     fraction: f64,
     steps: usize,
 ) -> Result<World, Instability> {
-    let mut world = dense_packing(400, 1.0);
-    world.params.level = level;
-    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
-    world.set_levels(&levels);
+    let mut world = dense_packing_at(level);
     sdem::run::bench::with_friction(&mut world, 0.5);
     world.params.dt *= fraction / 0.4;
-    for _ in 0..steps {
-        world.step()?;
-    }
-    Ok(world)
+    run_for(world, steps)
 }
 
 #[test]
@@ -320,17 +325,11 @@ fn dense_run_at_level(
     fraction: f64,
     steps: usize,
 ) -> Result<World, Instability> {
-    let mut world = dense_packing(400, 1.0);
-    world.params.level = level;
-    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
-    world.set_levels(&levels);
+    let mut world = dense_packing_at(level);
     let p = &world.params;
     world.params.dt =
         fraction * critical_time_step(&p.material, &p.law, 0.5 * 0.024, estimate_level);
-    for _ in 0..steps {
-        world.step()?;
-    }
-    Ok(world)
+    run_for(world, steps)
 }
 
 #[test]
