@@ -181,9 +181,9 @@ pub struct StiffestModes {
 /// inertia. A rigid grain has none; nor has a volumetric grain of an incompressible material:
 /// it holds its deviator, and the volume correction (SPEC §6) sets its mean strain from its
 /// lost area after every step, so no force accelerates a strain. Its stiffest modes are a rigid
-/// grain's: measured on the dense `sdem bench` packing, all grains volumetric at nu = 0.5 run
-/// stable at 0.8 of the rigid estimate and go unstable at 0.9 (rigid grains: 0.9 and 1.0;
-/// tests/stability.rs).
+/// grain's: on the dense `sdem bench` packing, all grains volumetric at nu = 0.5 run stable at
+/// 0.8 of the rigid estimate and went unstable at 0.9 (rigid grains: 0.9 and 1.0; issue #16,
+/// fourth session); tests/stability.rs checks 0.8 and 2.0.
 pub fn has_dynamic_strains(material: &Material, level: ModelLevel) -> bool {
     match level {
         ModelLevel::Rigid => false,
@@ -213,13 +213,13 @@ pub fn stiffest_modes(
     let tangential = (4.0 * settings.tangential_ratio * law.initial_stiffness() * 2.0 / mass
         * tangential_coupling)
         .sqrt();
-    let deformation = if !dynamic_strains {
-        0.0
-    } else {
+    let deformation = if dynamic_strains {
         2.0 / radius
             * (material.deformation_stiffness()
                 / (material.density * settings.deformation_mass_scale))
                 .sqrt()
+    } else {
+        0.0
     };
     StiffestModes {
         deformation,
