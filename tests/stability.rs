@@ -339,8 +339,8 @@ fn incompressible_volumetric_grains_take_the_rigid_step_stably_and_are_stopped_a
     // drives a strain DoF and the grain's stiffest mode is a rigid grain's contact mode. The
     // estimate is the rigid one; 0.8 of it relaxes the dense packing (the grains' areas held by
     // the correction while their radii grow), 2.0 of it is stopped by a diagnostic. Full grains,
-    // whose strains the contacts do drive, are stopped at that same 0.8 (measured: within 4
-    // steps), so the test tells the two levels apart.
+    // whose strains the contacts do drive, are stopped at that same 0.8 (the fourth session saw
+    // it within 4 steps), so the test tells the two levels apart.
     let world = dense_packing(400, 1.0);
     let p = &world.params;
     assert!(

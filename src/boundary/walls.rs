@@ -22,6 +22,13 @@ impl Wall {
         }
     }
 
+    /// Where the wall's point is after it moves at its velocity for `dt` (the end of a step
+    /// moves it there).
+    #[inline]
+    pub fn point_after(&self, dt: f64) -> DVec2 {
+        self.point + self.velocity * dt
+    }
+
     /// Signed distance of x from the wall, positive on the domain side.
     #[inline]
     pub fn height(&self, x: DVec2) -> f64 {
@@ -62,6 +69,24 @@ pub fn box_walls(x0: f64, x1: f64, y0: f64, y1: f64) -> Vec<Wall> {
         Wall::new(DVec2::new(x0, y0), DVec2::Y),
         Wall::new(DVec2::new(x0, y1), -DVec2::Y),
     ]
+}
+
+/// Lower-left and upper-right corners of a box made by [`box_walls`].
+pub fn box_corners(walls: &[Wall]) -> (DVec2, DVec2) {
+    corners(|w| walls[w].point)
+}
+
+/// [`box_corners`] once every wall has moved by its velocity over `dt`
+/// ([`Wall::point_after`]).
+pub fn box_corners_after(walls: &[Wall], dt: f64) -> (DVec2, DVec2) {
+    corners(|w| walls[w].point_after(dt))
+}
+
+fn corners(point: impl Fn(usize) -> DVec2) -> (DVec2, DVec2) {
+    (
+        DVec2::new(point(LEFT).x, point(BOTTOM).y),
+        DVec2::new(point(RIGHT).x, point(TOP).y),
+    )
 }
 
 /// Width and height of a box made by [`box_walls`].

@@ -25,7 +25,7 @@ pub use instability::Instability;
 pub use parameters::Parameters;
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
-use crate::boundary::walls::Wall;
+use crate::boundary::walls::{Wall, box_corners, box_corners_after};
 use crate::contact::friction::TangentialResponse;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
@@ -385,15 +385,15 @@ pub struct World {
 /// The homogeneous deformation that maps the box with corners `from_lo`, `from_hi` (lower left,
 /// upper right) onto the box `to_lo`, `to_hi`, each axis on its own: the affine part of an
 /// affine compression. Velocities are left alone (they stay peculiar).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BoxCarry {
+#[derive(Debug, Clone, Copy)]
+struct BoxCarry {
     from_lo: DVec2,
     to_lo: DVec2,
     scale: DVec2,
 }
 
 impl BoxCarry {
-    pub fn new(from_lo: DVec2, from_hi: DVec2, to_lo: DVec2, to_hi: DVec2) -> Self {
+    fn new((from_lo, from_hi): (DVec2, DVec2), (to_lo, to_hi): (DVec2, DVec2)) -> Self {
         Self {
             from_lo,
             to_lo,
@@ -403,21 +403,9 @@ impl BoxCarry {
 
     /// Where the point `x` of the first box goes.
     #[inline]
-    pub fn apply(&self, x: DVec2) -> DVec2 {
+    fn apply(&self, x: DVec2) -> DVec2 {
         self.to_lo + (x - self.from_lo) * self.scale
     }
-}
-
-/// The box's corners (lower left, upper right) of walls in the order of
-/// [`box_walls`](crate::boundary::walls::box_walls), after each wall has moved by its velocity
-/// over `dt` (`dt = 0`: now), as the end of a step moves them.
-fn box_corners_after(walls: &[Wall], dt: f64) -> (DVec2, DVec2) {
-    use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-    let at = |w: usize| walls[w].point + walls[w].velocity * dt;
-    (
-        DVec2::new(at(LEFT).x, at(BOTTOM).y),
-        DVec2::new(at(RIGHT).x, at(TOP).y),
-    )
 }
 
 impl World {
@@ -869,13 +857,9 @@ impl World {
         // The affine carry over this step: from the box now to the box after the walls' move
         // at its end. Applied to each grain right after its update, where the pass has the
         // grain at hand (a pass of its own after the step cost some 4% of a 10⁵-grain run).
-        let carried_box = (self.affine_carry && cell.is_none()).then(|| {
-            (
-                box_corners_after(&self.walls, 0.0),
-                box_corners_after(&self.walls, params.dt),
-            )
-        });
-        let carry = carried_box.map(|(from, to)| BoxCarry::new(from.0, from.1, to.0, to.1));
+        let carried_box = (self.affine_carry && cell.is_none())
+            .then(|| (box_corners(walls), box_corners_after(walls, params.dt)));
+        let carry = carried_box.map(|(from, to)| BoxCarry::new(from, to));
         let step = self.step;
         let chunk_sums: Vec<ChunkSums> = self
             .grains
@@ -1082,7 +1066,7 @@ impl World {
                     self.neighbors.follow_affine(from, to);
                 }
                 for wall in &mut self.walls {
-                    wall.point += wall.velocity * dt;
+                    wall.point = wall.point_after(dt);
                 }
             }
         }
@@ -1121,19 +1105,6 @@ impl World {
         } else if wrapped > 0 {
             self.neighbors.follow_wraps(&self.wraps);
         }
-    }
-
-    /// Moves every grain centre with the homogeneous deformation that maps the box
-    /// `[from_lo, from_hi]` onto `[to_lo, to_hi]` (corners), each axis on its own: the affine
-    /// part of an affine compression. Velocities are left alone (they stay peculiar).
-    pub fn remap_affine(&mut self, from_lo: DVec2, from_hi: DVec2, to_lo: DVec2, to_hi: DVec2) {
-        let carry = BoxCarry::new(from_lo, from_hi, to_lo, to_hi);
-        self.grains
-            .par_iter_mut()
-            .with_min_len(GRAIN_CHUNK)
-            .for_each(|g| g.center = carry.apply(g.center));
-        self.neighbors
-            .follow_affine((from_lo, from_hi), (to_lo, to_hi));
     }
 
     /// The contacts of the last step between grains, in pair order: the pair `[i, j]`, its
@@ -1520,9 +1491,9 @@ mod tests {
     #[test]
     fn the_carry_inside_the_step_is_the_remap_after_it_bit_for_bit() {
         // Expectation: the affine carry that the grain pass applies to each grain is the map
-        // `World::remap_affine` applied after the step (from the box before the walls' move to
-        // the box after it), so an affine run keeps its bits; the neighbour list's reference
-        // centres follow alike (the rebuild decisions, hence the later steps, agree too).
+        // the run loop applied after the step (from the box before the walls' move to the box
+        // after it), so an affine run keeps its bits; the neighbour list's reference centres
+        // follow alike (the rebuild decisions, hence the later steps, agree too).
         use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
         let squeezed = || {
             let mut world = crate::run::bench::dense_packing(400, 1.0);
@@ -1542,16 +1513,20 @@ mod tests {
             world
         };
         let world = squeezed();
-        let corners = |w: &World| box_corners_after(&w.walls, 0.0);
         let mut carried = world.clone();
         carried.affine_carry = true;
         let mut remapped = world;
         for _ in 0..60 {
             carried.step().unwrap();
-            let (from_lo, from_hi) = corners(&remapped);
+            // The remap as the run loop did it, in a pass of its own after the step.
+            let from = box_corners(&remapped.walls);
             remapped.step().unwrap();
-            let (to_lo, to_hi) = corners(&remapped);
-            remapped.remap_affine(from_lo, from_hi, to_lo, to_hi);
+            let to = box_corners(&remapped.walls);
+            let map = BoxCarry::new(from, to);
+            for g in &mut remapped.grains {
+                g.center = map.apply(g.center);
+            }
+            remapped.neighbors.follow_affine(from, to);
         }
         let state = |w: &World| -> Vec<u64> {
             w.grains

@@ -13,7 +13,7 @@
 //! contour itself: the polygon of its boundary nodes is drawn as it is, clipped by the walls
 //! only, with the same colours.
 
-use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+use crate::boundary::walls::box_corners;
 use crate::output::colour::stress_colour_max;
 pub use crate::output::colour::viridis;
 pub use crate::output::frame::outline::{clip_half_plane, frame_cuts, grain_outline};
@@ -93,8 +93,7 @@ fn view_bounds(frame: &Frame, region: Option<(DVec2, DVec2)>) -> (DVec2, DVec2) 
     }
     // The first four walls are the box's; planes (a scenario's `planes`) follow them.
     if frame.walls.len() >= 4 {
-        let lo = DVec2::new(frame.walls[LEFT].point.x, frame.walls[BOTTOM].point.y);
-        let hi = DVec2::new(frame.walls[RIGHT].point.x, frame.walls[TOP].point.y);
+        let (lo, hi) = box_corners(&frame.walls);
         if (hi - lo).min_element() > 0.0 && lo.is_finite() && hi.is_finite() {
             return (lo, hi);
         }
