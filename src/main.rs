@@ -100,7 +100,7 @@ enum Command {
         steps: u64,
         #[arg(long)]
         threads: Option<usize>,
-        /// Contour resolution dbeta in degrees.
+        /// Contour resolution dbeta in degrees; 0 for the exact ellipses (dbeta -> 0).
         #[arg(long, default_value_t = 1.0)]
         resolution: f64,
         /// Coulomb friction coefficient of every contact (0: frictionless).

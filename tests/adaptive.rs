@@ -274,7 +274,7 @@ fn adaptive_matches_full_on_a_grain_under_isotropic_load() {
     }
     assert_eq!(adaptive.levels()[0].level, ModelLevel::Volumetric);
     let (a, b) = (full.grains[0], adaptive.grains[0]);
-    let sagitta = 1.0 - (0.5 * full.table.dbeta).cos();
+    let sagitta = 1.0 - (0.5 * full.contours.dbeta()).cos();
     let relative = (a.eps1 - b.eps1).abs() / a.eps1.abs();
     assert!(
         relative < 2.0 * sagitta,

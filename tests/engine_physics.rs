@@ -365,7 +365,7 @@ fn volumetric_and_full_levels_agree_under_isotropic_load() {
     // differently, and where the walls meet the polygon (a vertex or mid-edge) shifts the contact
     // depth by at most the sagitta of an edge, R (1 - cos(dbeta/2)) = 3.8e-5 R at 1 degree. The
     // strains may differ by that relative amount, twice over (two opposite walls).
-    let sagitta = 1.0 - (0.5 * full.table.dbeta).cos();
+    let sagitta = 1.0 - (0.5 * full.contours.dbeta()).cos();
     let relative = (a.eps1 - b.eps1).abs() / a.eps1.abs();
     assert!(
         relative < 2.0 * sagitta,

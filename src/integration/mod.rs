@@ -31,9 +31,7 @@ use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::circle::{disc_disc, disc_wall};
 use crate::geometry::contour::QUARTER_TURN;
-use crate::geometry::{
-    ContourTable, GrainShape, Overlap, PairHint, grain_grain_hinted, grain_wall,
-};
+use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::grain::adaptive::stress_invariants;
 use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
@@ -340,7 +338,8 @@ impl ContactHistory {
 #[derive(Debug, Clone)]
 pub struct World {
     pub params: Parameters,
-    pub table: ContourTable,
+    /// The contours the contacts see: polygons, or the exact ellipses (`resolution_deg = 0`).
+    pub contours: Contours,
     pub grains: Vec<Grain>,
     /// The box walls; in a periodic cell, the four virtual walls that drive the cell (see
     /// [`PeriodicBoundary`]), which meet no grain.
@@ -411,7 +410,7 @@ impl BoxCarry {
 impl World {
     pub fn new(params: Parameters, grains: Vec<Grain>, walls: Vec<Wall>) -> Self {
         assert!(walls.len() <= MAX_WALLS, "at most {MAX_WALLS} walls");
-        let table = ContourTable::new(params.resolution_deg);
+        let contours = Contours::new(params.resolution_deg);
         let mean_radius = grains.iter().map(|g| g.radius).sum::<f64>() / grains.len().max(1) as f64;
         let skin = params.skin_fraction * mean_radius;
         let n = grains.len();
@@ -423,7 +422,7 @@ impl World {
         };
         let mut world = Self {
             params,
-            table,
+            contours,
             grains,
             walls,
             periodic: None,
@@ -666,7 +665,7 @@ impl World {
     /// Contact geometry and forces of every candidate pair, and their sums.
     fn compute_pair_contacts(&mut self) -> Result<PairSums, Instability> {
         let params = &self.params;
-        let table = &self.table;
+        let contours = &self.contours;
         let frames = &self.frames;
         let pairs = &self.neighbors.pairs;
         let images = &self.neighbors.images;
@@ -721,7 +720,7 @@ impl World {
                             center: center_j,
                             ..fj.shape()
                         };
-                        grain_grain_hinted(table, &fi.shape(), &shape_j, &mut hint)
+                        contours.grain_grain(&fi.shape(), &shape_j, &mut hint)
                     };
                     // An open or failed pair keeps only its search hint (its spring resets);
                     // a contact writes its record too.
@@ -841,7 +840,7 @@ impl World {
         self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
 
         let params = &self.params;
-        let table = &self.table;
+        let contours = &self.contours;
         let frames = &self.frames;
         let cell = self.cell();
         // A periodic cell's virtual walls meet no grain.
@@ -934,7 +933,7 @@ impl World {
                         let overlap = if frame.circle {
                             disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
                         } else {
-                            grain_wall(table, &frame.shape(), wall.point, wall.normal)
+                            contours.grain_wall(&frame.shape(), wall.point, wall.normal)
                         };
                         match overlap {
                             Overlap::Separate => {}

@@ -14,7 +14,7 @@ pub struct Parameters {
     /// The adaptive level (issue #6): each grain picks its own level; `None`: all at `level`.
     pub adaptive: Option<Adaptive>,
     pub law: SecantLaw,
-    /// Contour resolution dbeta, degrees.
+    /// Contour resolution dbeta, degrees; 0 for the exact ellipses ([`crate::geometry::Contours`]).
     pub resolution_deg: f64,
     /// gamma of the contact dashpot (eq. 61), dimensionless.
     pub contact_damping: f64,

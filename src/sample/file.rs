@@ -27,7 +27,7 @@
 use crate::boundary::walls::box_walls;
 use crate::contact::SecantLaw;
 use crate::geometry::broadphase::NeighborList;
-use crate::geometry::{ContourTable, GrainShape, Overlap, grain_grain, grain_wall};
+use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::grain::Grain;
 use glam::DVec2;
 use std::path::Path;
@@ -268,7 +268,7 @@ pub fn check_packing(
     law: &SecantLaw,
     resolution_deg: f64,
 ) -> Result<(), SampleFileError> {
-    let table = ContourTable::new(resolution_deg);
+    let contours = Contours::new(resolution_deg);
     let shapes: Vec<GrainShape> = sample.grains.iter().map(Grain::shape).collect();
     let at = |g: usize, message: String| SampleFileError::Line {
         path: path.to_string(),
@@ -295,7 +295,7 @@ pub fn check_packing(
             ));
         }
         for (w, wall) in walls.iter().enumerate() {
-            match grain_wall(&table, shape, wall.point, wall.normal) {
+            match contours.grain_wall(shape, wall.point, wall.normal) {
                 Overlap::Separate => {}
                 Overlap::Swallowed => {
                     return Err(at(
@@ -343,7 +343,7 @@ pub fn check_packing(
         // reaching past the centre), and two copies of one grain, whose contours lie on each
         // other and cross nowhere, are caught here too.
         let inside =
-            |a: &GrainShape, b: &GrainShape| table.contains(b.inv_map * (a.center - b.center));
+            |a: &GrainShape, b: &GrainShape| contours.contains(b.inv_map * (a.center - b.center));
         if inside(&shapes[i], &shapes[j]) || inside(&shapes[j], &shapes[i]) {
             return Err(pair(format!(
                 "the grains (radii {} and {}, centres {} apart) overlap so much that a centre \
@@ -358,7 +358,7 @@ pub fn check_packing(
                 }
             )));
         }
-        match grain_grain(&table, &shapes[i], &shapes[j]) {
+        match contours.grain_grain(&shapes[i], &shapes[j], &mut PairHint::default()) {
             Overlap::Separate => {}
             Overlap::Swallowed => {
                 return Err(pair(format!(

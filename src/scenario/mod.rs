@@ -570,7 +570,8 @@ pub struct ContactSettings {
     pub a: f64,
     /// Constant b of the secant law (paper: 2).
     pub b: f64,
-    /// Contour resolution dbeta in degrees (paper: 1).
+    /// Contour resolution dbeta in degrees (paper: 1); 0 for the exact ellipses, the polygons'
+    /// limit as dbeta -> 0 ([`Contours::Exact`](crate::geometry::Contours)).
     pub resolution_deg: f64,
     /// gamma of the contact dashpot (eq. 61), dimensionless.
     pub damping: f64,
@@ -971,11 +972,11 @@ impl Scenario {
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
-        if !(c.resolution_deg.is_finite() && c.resolution_deg > 0.0 && c.resolution_deg <= 45.0) {
+        if !(c.resolution_deg.is_finite() && c.resolution_deg >= 0.0 && c.resolution_deg <= 45.0) {
             return Err(invalid(
                 "contact.resolution_deg",
                 num(c.resolution_deg),
-                "in (0, 45] degrees",
+                "in (0, 45] degrees, or 0 for the exact ellipses",
             ));
         }
         non_negative("contact.damping", c.damping)?;

@@ -151,7 +151,7 @@ impl TrajectoryWriter {
             stress_sign: "/grains: tension positive; /macro: compression positive",
             extra: vec![
                 ("resolution_deg", format!("{}", p.resolution_deg)),
-                ("contour_nodes", world.table.nodes.to_string()),
+                ("contour_nodes", world.contours.nodes().to_string()),
             ],
         };
         Self::create_log(settings, scenario, SCENE_SCHEMA, info, |inner, path| {
