@@ -48,6 +48,20 @@ fn grain_wall_contact(bencher: divan::Bencher) {
     bencher.bench(|| grain_wall(&table, black_box(&g), DVec2::ZERO, DVec2::Y));
 }
 
+/// The exact ellipses' contacts (`resolution_deg: 0`, issue #16), at the same overlaps and
+/// shapes as the polygons: no hint, so every call is cold.
+#[divan::bench(args = [0.01, 0.05, 0.15])]
+fn ellipse_ellipse(bencher: divan::Bencher, depth: f64) {
+    let (i, j) = pair(depth);
+    bencher.bench(|| sdem::geometry::ellipse_ellipse(black_box(&i), black_box(&j)));
+}
+
+#[divan::bench]
+fn ellipse_wall(bencher: divan::Bencher) {
+    let g = GrainShape::new(DVec2::new(0.0, 0.011), 0.012, 0.3, 0.02, -0.03, 0.7);
+    bencher.bench(|| sdem::geometry::ellipse_wall(black_box(&g), DVec2::ZERO, DVec2::Y));
+}
+
 /// The closed-form contacts of rigid discs (issue #16), at the same overlaps as the polygons.
 #[divan::bench(args = [0.01, 0.05, 0.15])]
 fn disc_disc(bencher: divan::Bencher, depth: f64) {

@@ -2,6 +2,8 @@
 //! expectations: what the polygon's orientation blurred is exact, and the step is as
 //! deterministic as with polygons.
 
+mod common;
+
 use glam::DVec2;
 use sdem::boundary::walls::{Wall, box_walls};
 use sdem::grain::{Grain, Material, ModelLevel};
@@ -96,11 +98,7 @@ fn exact_contours_give_the_same_bits_on_one_and_two_threads() {
     // Expectation: the exact kernel carries nothing between steps and the sums run in a fixed
     // order, so the thread count cannot change a bit.
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::with_threads(threads, || {
             let mut world = sdem::run::bench::dense_packing(400, 0.0);
             for _ in 0..150 {
                 world.step().unwrap();

@@ -33,7 +33,9 @@
 
 use super::circle::chord_segment_area;
 use super::contour::{ContourTable, GrainShape};
-use super::intersection::{ContactGeometry, Overlap, PairHint, grain_grain_hinted, grain_wall};
+use super::intersection::{
+    Chord, ContactGeometry, Overlap, PairHint, grain_grain_hinted, grain_wall,
+};
 use glam::{DMat2, DVec2};
 
 /// How the contacts see a grain's contour (SPEC §5): the polygon of nodes every dbeta, or the
@@ -333,15 +335,14 @@ pub fn ellipse_ellipse(i: &GrainShape, j: &GrainShape) -> Overlap {
     };
     let (u_lo, u_hi) = (quartic.direction(tau_lo), quartic.direction(tau_hi));
     let (p_lo, p_hi) = (i.center + i.map * u_lo, i.center + i.map * u_hi);
-    let chord = p_hi - p_lo;
-    let length = chord.length();
-    if length <= f64::EPSILON * i.bounding_radius.min(j.bounding_radius) {
+    let Some(Chord {
+        length,
+        normal,
+        point,
+    }) = Chord::between(p_lo, p_hi, i, j)
+    else {
         return Overlap::Separate;
-    }
-    let tangent = chord / length;
-    // Right-hand normal of i's chord: i's cap lies on this side, towards j.
-    let normal = DVec2::new(tangent.y, -tangent.x);
-    let point = 0.5 * (p_lo + p_hi);
+    };
     let depth_i = (i.center - point).dot(normal) + (i.map.transpose() * normal).length();
     let depth_j = (point - j.center).dot(normal) + (j.map.transpose() * normal).length();
     // i's cap: the arc of angle 2 (atan tau_hi - atan tau_lo) < 2 pi, whose half angle has

@@ -440,6 +440,35 @@ fn cap_area_and_depth(
     (0.5 * twice_area, depth.max(0.0))
 }
 
+/// The chord PP' of a grain–grain contact.
+pub(super) struct Chord {
+    pub length: f64,
+    /// Right-hand normal of i's chord, from `p_lo` to `p_hi` (the order of i's contour): i's
+    /// cap lies on this side, towards j.
+    pub normal: DVec2,
+    /// `x_c`, the chord's middle.
+    pub point: DVec2,
+}
+
+impl Chord {
+    /// The chord between the crossing points of grains i and j; None when it is shorter than
+    /// rounding (the contours only touch).
+    #[inline]
+    pub fn between(p_lo: DVec2, p_hi: DVec2, i: &GrainShape, j: &GrainShape) -> Option<Self> {
+        let chord = p_hi - p_lo;
+        let length = chord.length();
+        if length <= f64::EPSILON * i.bounding_radius.min(j.bounding_radius) {
+            return None;
+        }
+        let tangent = chord / length;
+        Some(Self {
+            length,
+            normal: DVec2::new(tangent.y, -tangent.x),
+            point: 0.5 * (p_lo + p_hi),
+        })
+    }
+}
+
 /// Contact between the contour polygons of grains i and j.
 pub fn grain_grain(table: &ContourTable, i: &GrainShape, j: &GrainShape) -> Overlap {
     grain_grain_hinted(table, i, j, &mut PairHint::default())
@@ -522,15 +551,14 @@ pub fn grain_grain_hinted(
             )
         }
     };
-    let chord = p_hi - p_lo;
-    let length = chord.length();
-    if length <= f64::EPSILON * i.bounding_radius.min(j.bounding_radius) {
+    let Some(Chord {
+        length,
+        normal,
+        point,
+    }) = Chord::between(p_lo, p_hi, i, j)
+    else {
         return Overlap::Separate;
-    }
-    let tangent = chord / length;
-    // Right-hand normal of i's chord: i's cap lies on this side, towards j.
-    let normal = DVec2::new(tangent.y, -tangent.x);
-    let point = 0.5 * (p_lo + p_hi);
+    };
     let (cap_area_i, depth_i) = match chain_i {
         Some(c) => cap_area_and_depth(table, i, (c.lo, c.hi), p_lo, p_hi, point, normal),
         None => (0.0, 0.0),
