@@ -105,9 +105,13 @@ impl Contours {
 
 /// Newton iterations before a search gives up (it converges in 2–4 from its start).
 const MAX_ITERATIONS: usize = 12;
-/// A step this small (in tan(beta / 2)) leaves an error below its square (Newton) or its cube
-/// (Halley): the iterate is converged.
+/// A Newton step of the deepest-point search this small (in tan(beta / 2)) leaves an error of
+/// its square: converged.
 const CONVERGED_STEP: f64 = 1e-9;
+/// A Halley step this small against the root's distance from the pivot leaves an error of
+/// about its cube (times the ratio of P's curvature to its slope there, which that distance
+/// bounds): converged.
+const HALLEY_CONVERGED: f64 = 1e-5;
 /// Largest step of the deepest-point search, in tan(beta / 2) (a turn of about 53 degrees).
 const MAX_STEP: f64 = 0.5;
 
@@ -225,7 +229,7 @@ fn crossings(quartic: &Quartic, pivot: f64, guesses: [f64; 2]) -> (f64, f64) {
                 continue;
             }
             *root = next;
-            *done = step.abs() <= CONVERGED_STEP * (1.0 + next.abs());
+            *done = step.abs() <= HALLEY_CONVERGED * (next - pivot).abs();
         }
         if done[0] && done[1] {
             return (roots[0], roots[1]);
