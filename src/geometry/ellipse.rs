@@ -9,8 +9,7 @@
 //!
 //! Grain i's contour is the image of the unit circle, `x(u) = c_i + A_i u` with |u| = 1. In
 //! grain j's reference frame it is `g(u) = M u + t` (`M = A_j^-1 A_i`, `t = A_j^-1 (c_i - c_j)`)
-//! and it lies inside j where `f(u) = |g(u)|^2 - 1 < 0`. Along the circle, with `u'` the quarter
-//! turn of u.
+//! and it lies inside j where `f(u) = |g(u)|^2 - 1 < 0`.
 //!
 //! - Along the rational parametrisation of the unit circle about the direction of j's centre,
 //!   `u = ((1 - tau^2) e + 2 tau e') / (1 + tau^2)`, `(1 + tau^2)^2 f` is a quartic P in tau:
@@ -103,7 +102,7 @@ impl Contours {
     }
 }
 
-/// Newton iterations before a search gives up (it converges in 2–4 from its start).
+/// Iterations before a search gives up (Halley's converges in 2–3 from its start).
 const MAX_ITERATIONS: usize = 12;
 /// A Newton step of the deepest-point search this small (in tan(beta / 2)) leaves an error of
 /// its square: converged.
