@@ -338,16 +338,14 @@ pub fn ellipse_ellipse(i: &GrainShape, j: &GrainShape) -> Overlap {
     };
     let (u_lo, u_hi) = (quartic.direction(tau_lo), quartic.direction(tau_hi));
     let (p_lo, p_hi) = (i.center + i.map * u_lo, i.center + i.map * u_hi);
-    let Some(Chord {
-        length,
-        normal,
-        point,
-    }) = Chord::between(p_lo, p_hi, i, j)
-    else {
+    let Some(chord) = Chord::between(p_lo, p_hi, i, j) else {
         return Overlap::Separate;
     };
-    let depth_i = (i.center - point).dot(normal) + (i.map.transpose() * normal).length();
-    let depth_j = (point - j.center).dot(normal) + (j.map.transpose() * normal).length();
+    // The caps' depths beyond the chord: the ellipses' support functions along the normal.
+    let outermost = |shape: &GrainShape, direction: DVec2| {
+        (shape.center - chord.point).dot(direction) + (shape.map.transpose() * direction).length()
+    };
+    let (depth_i, depth_j) = (outermost(i, chord.normal), outermost(j, -chord.normal));
     // i's cap: the arc of angle 2 (atan tau_hi - atan tau_lo) < 2 pi, whose half angle has
     // the sine and cosine below (no cancellation for shallow caps).
     let norm = ((1.0 + tau_lo * tau_lo) * (1.0 + tau_hi * tau_hi)).sqrt();
@@ -358,9 +356,9 @@ pub fn ellipse_ellipse(i: &GrainShape, j: &GrainShape) -> Overlap {
     let (w_lo, w_hi) = (quartic.image(u_lo), quartic.image(u_hi));
     let cap_area_j = j.map.determinant() * unit_segment_area(w_hi, w_lo);
     Overlap::Contact(ContactGeometry {
-        point,
-        normal,
-        length,
+        point: chord.point,
+        normal: chord.normal,
+        length: chord.length,
         cap_area_i,
         cap_area_j,
         normal_gap: -0.5 * (depth_i.max(0.0) + depth_j.max(0.0)),
