@@ -160,13 +160,13 @@ impl Quartic {
         (value, slope)
     }
 
-    /// P' and P'' at tau.
+    /// P, P' and P'' at tau.
     #[inline]
-    fn slope_and_curvature(&self, tau: f64) -> (f64, f64) {
-        let [_, p1, p2, p3, p4] = self.p;
-        let slope = ((4.0 * p4 * tau + 3.0 * p3) * tau + 2.0 * p2) * tau + p1;
+    fn derivatives(&self, tau: f64) -> (f64, f64, f64) {
+        let (value, slope) = self.value_and_slope(tau);
+        let [_, _, p2, p3, p4] = self.p;
         let curvature = (12.0 * p4 * tau + 6.0 * p3) * tau + 2.0 * p2;
-        (slope, curvature)
+        (value, slope, curvature)
     }
 
     /// The point of i's unit circle at tau.
@@ -187,7 +187,7 @@ impl Quartic {
 fn deepest_point(quartic: &Quartic) -> (f64, f64, f64) {
     let mut tau = 0.0;
     for _ in 0..MAX_ITERATIONS {
-        let (slope, curvature) = quartic.slope_and_curvature(tau);
+        let (_, slope, curvature) = quartic.derivatives(tau);
         let step = if curvature > 0.0 {
             (-slope / curvature).clamp(-MAX_STEP, MAX_STEP)
         } else {
@@ -198,8 +198,7 @@ fn deepest_point(quartic: &Quartic) -> (f64, f64, f64) {
             break;
         }
     }
-    let (value, _) = quartic.value_and_slope(tau);
-    let (_, curvature) = quartic.slope_and_curvature(tau);
+    let (value, _, curvature) = quartic.derivatives(tau);
     (tau, value, curvature)
 }
 
@@ -215,8 +214,7 @@ fn crossings(quartic: &Quartic, pivot: f64, guesses: [f64; 2]) -> (f64, f64) {
             if *done {
                 continue;
             }
-            let (value, slope) = quartic.value_and_slope(*root);
-            let (_, curvature) = quartic.slope_and_curvature(*root);
+            let (value, slope, curvature) = quartic.derivatives(*root);
             let step = -2.0 * value * slope / (2.0 * slope * slope - value * curvature);
             let next = *root + step;
             // On its side P grows away from the pivot: a slope the other way, or a root that
@@ -248,20 +246,20 @@ fn crossings(quartic: &Quartic, pivot: f64, guesses: [f64; 2]) -> (f64, f64) {
     )
 }
 
-/// The root of P beyond `deepest` (P < 0) on the side of increasing tau (`upward`) or the other:
+/// The root of P beyond `pivot` (P < 0) on the side of increasing tau (`upward`) or the other:
 /// brackets it by doubling the distance until P > 0, then bisects. Slow and sure, for the
-/// contours Newton cannot follow.
+/// contours Halley's iteration cannot follow.
 #[cold]
-fn bisect_crossing(quartic: &Quartic, deepest: f64, upward: bool) -> f64 {
+fn bisect_crossing(quartic: &Quartic, pivot: f64, upward: bool) -> f64 {
     let direction = if upward { 1.0 } else { -1.0 };
-    let mut inside = deepest;
+    let mut inside = pivot;
     let mut distance = 1e-3;
-    let mut outside = deepest + direction * distance;
+    let mut outside = pivot + direction * distance;
     // P > 0 for large |tau| (p4 > 0), so the doubling ends.
     while quartic.value_and_slope(outside).0 < 0.0 {
         inside = outside;
         distance *= 2.0;
-        outside = deepest + direction * distance;
+        outside = pivot + direction * distance;
     }
     for _ in 0..200 {
         let middle = 0.5 * (inside + outside);
