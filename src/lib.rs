@@ -22,6 +22,7 @@ pub mod contact;
 pub mod geometry;
 pub mod grain;
 pub mod integration;
+pub mod lanes;
 pub mod meshfree;
 pub mod output;
 pub mod run;

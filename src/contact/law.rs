@@ -4,6 +4,8 @@
 //! force `F_n` is negative when repulsive, and acts as `F_n n` on grain i (`n` from i to j) and
 //! `-F_n n` on grain j.
 
+use crate::lanes::Real;
+
 /// `F_n = E eps_n L_c = k_n delta_n`, `eps_n = delta_n / (a L_c + (b - 1) delta_n)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SecantLaw {
@@ -50,24 +52,43 @@ impl SecantLaw {
     /// Elastic response for a contact of length `length` and normal gap `normal_gap` (<= 0).
     #[inline]
     pub fn response(&self, length: f64, normal_gap: f64) -> Result<NormalResponse, DomainExit> {
-        let nominal = self.a * length;
-        let mut denominator = nominal + (self.b - 1.0) * normal_gap;
-        let floor = self.floor * nominal;
+        let (mut denominator, floor) = self.denominator(length, normal_gap);
         let mut capped = false;
-        // Written so that a NaN denominator also counts as out of the domain.
-        if denominator.is_nan() || denominator <= floor {
+        if !Self::in_domain(denominator, floor) {
             if !self.cap || !denominator.is_finite() {
                 return Err(DomainExit { length, normal_gap });
             }
             denominator = floor;
             capped = true;
         }
-        let stiffness = self.young * length / denominator;
+        let stiffness = self.stiffness(length, denominator);
         Ok(NormalResponse {
             force: stiffness * normal_gap,
             stiffness,
             capped,
         })
+    }
+
+    /// The law's denominator `a L_c + (b-1) delta_n` and its floor `floor a L_c`, written once
+    /// for one contact and for [lanes](crate::lanes) of contacts.
+    #[inline(always)]
+    pub fn denominator<T: Real>(&self, length: T, normal_gap: T) -> (T, T) {
+        let nominal = T::splat(self.a) * length;
+        let denominator = nominal + T::splat(self.b - 1.0) * normal_gap;
+        (denominator, T::splat(self.floor) * nominal)
+    }
+
+    /// Whether a contact whose [`denominator`](Self::denominator) is `denominator` lies in the
+    /// law's domain (above its floor); a NaN denominator does not.
+    #[inline(always)]
+    pub fn in_domain(denominator: f64, floor: f64) -> bool {
+        denominator > floor
+    }
+
+    /// The secant stiffness `E L_c / denominator`; the force is `stiffness * delta_n`.
+    #[inline(always)]
+    pub fn stiffness<T: Real>(&self, length: T, denominator: T) -> T {
+        T::splat(self.young) * length / denominator
     }
 
     /// Secant stiffness at vanishing overlap, `E / a`: the stiffest a shallow contact gets.
@@ -78,16 +99,17 @@ impl SecantLaw {
 
 /// Total normal force with the dashpot of eq. 61: `F = k_n delta_n + c ddelta_n/dt`,
 /// `c = gamma sqrt(k_n m_eff)`, clamped to be repulsive only (`F <= 0`).
-#[inline]
-pub fn damped_normal_force(
-    elastic: f64,
-    stiffness: f64,
-    effective_mass: f64,
-    damping_ratio: f64,
-    gap_rate: f64,
-) -> f64 {
+/// Written once for one contact and for [lanes](crate::lanes) of contacts.
+#[inline(always)]
+pub fn damped_normal_force<T: Real>(
+    elastic: T,
+    stiffness: T,
+    effective_mass: T,
+    damping_ratio: T,
+    gap_rate: T,
+) -> T {
     let dashpot = damping_ratio * (stiffness * effective_mass).sqrt();
-    (elastic + dashpot * gap_rate).min(0.0)
+    (elastic + dashpot * gap_rate).min(T::splat(0.0))
 }
 
 #[cfg(test)]

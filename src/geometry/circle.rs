@@ -12,6 +12,7 @@
 //! first body towards the second (or the wall); gaps are negative when the bodies interpenetrate.
 
 use super::intersection::{ContactGeometry, Overlap};
+use crate::lanes::Real;
 use glam::DVec2;
 
 /// Area of the segment cut off a circle of radius `radius` by a chord at signed distance
@@ -27,34 +28,100 @@ use glam::DVec2;
 #[inline]
 pub fn chord_segment_area(radius: f64, distance: f64, half_chord: f64) -> f64 {
     let s = half_chord / radius;
-    if distance > 0.0 && s <= 0.3 {
-        // Coefficients 2 C(2k, k) / (4^k (2k + 3)), k = 0..11, summed in Estrin's order.
-        const C: [f64; 12] = [
-            2.0 / 3.0,
-            1.0 / 5.0,
-            3.0 / 28.0,
-            5.0 / 72.0,
-            35.0 / 704.0,
-            63.0 / 1664.0,
-            77.0 / 2560.0,
-            429.0 / 17408.0,
-            6435.0 / 311_296.0,
-            12155.0 / 688_128.0,
-            46189.0 / 3_014_656.0,
-            88179.0 / 6_553_600.0,
-        ];
-        let u = s * s;
-        let (u2, u4) = (u * u, u * u * u * u);
-        let pair = |k: usize| C[k] + C[k + 1] * u;
-        let low = pair(0) + pair(2) * u2;
-        let middle = pair(4) + pair(6) * u2;
-        let high = pair(8) + pair(10) * u2;
-        let series = low + (middle + high * u4) * u4;
-        radius * radius * s * u * series
+    if shallow_cap(distance, s) {
+        shallow_segment_area(radius, s)
     } else {
         let theta = libm::atan2(half_chord, distance);
         radius * radius * theta - distance * half_chord
     }
+}
+
+/// Whether a cap whose chord lies at `distance` from the centre, at `sin theta = s`, takes the
+/// series of [`shallow_segment_area`].
+#[inline(always)]
+pub fn shallow_cap(distance: f64, s: f64) -> bool {
+    distance > 0.0 && s <= 0.3
+}
+
+/// The series branch of [`chord_segment_area`] at `s = sin theta = half_chord / radius`, for a
+/// [`shallow_cap`]: `R^2 (theta - sin theta cos theta)`.
+#[inline(always)]
+pub fn shallow_segment_area<T: Real>(radius: T, s: T) -> T {
+    // Coefficients 2 C(2k, k) / (4^k (2k + 3)), k = 0..11, summed in Estrin's order.
+    const C: [f64; 12] = [
+        2.0 / 3.0,
+        1.0 / 5.0,
+        3.0 / 28.0,
+        5.0 / 72.0,
+        35.0 / 704.0,
+        63.0 / 1664.0,
+        77.0 / 2560.0,
+        429.0 / 17408.0,
+        6435.0 / 311_296.0,
+        12155.0 / 688_128.0,
+        46189.0 / 3_014_656.0,
+        88179.0 / 6_553_600.0,
+    ];
+    let u = s * s;
+    let (u2, u4) = (u * u, u * u * u * u);
+    let pair = |k: usize| T::splat(C[k]) + T::splat(C[k + 1]) * u;
+    let low = pair(0) + pair(2) * u2;
+    let middle = pair(4) + pair(6) * u2;
+    let high = pair(8) + pair(10) * u2;
+    let series = low + (middle + high * u4) * u4;
+    radius * radius * s * u * series
+}
+
+/// The chord of two circles that overlap, at centre distance `distance` along `branch` (from
+/// i's centre to j's): what [`disc_disc`] derives from the distance, written once for one pair
+/// and for [lanes](crate::lanes) of pairs.
+#[derive(Debug, Clone, Copy)]
+pub struct DiscChord<T> {
+    /// Unit normal from i towards j (x, y).
+    pub normal: [T; 2],
+    /// `R_i + R_j - d`.
+    pub overlap: T,
+    /// Depths of the two caps below the circles' outermost points along the normal.
+    pub depth_i: T,
+    pub depth_j: T,
+    pub half_chord: T,
+}
+
+/// [`DiscChord`] of the circles of radii `radius_i` and `radius_j` (`reach` their sum) whose
+/// centres lie `distance = |branch|` apart.
+#[inline(always)]
+pub fn disc_chord<T: Real>(
+    branch: [T; 2],
+    distance: T,
+    radius_i: T,
+    radius_j: T,
+    reach: T,
+) -> DiscChord<T> {
+    let normal = [branch[0] / distance, branch[1] / distance];
+    let overlap = reach - distance;
+    // Depths of the two caps below the circles' outermost points along the normal, each
+    // written as a product so that shallow contacts keep their precision:
+    // `R_i - a = overlap (d + R_j - R_i) / (2 d)`, a the chord's distance from i's centre.
+    let inv_two_distance = T::splat(0.5) / distance;
+    let depth_i = overlap * (distance + radius_j - radius_i) * inv_two_distance;
+    let depth_j = overlap * (distance + radius_i - radius_j) * inv_two_distance;
+    let half_chord = (depth_i * (T::splat(2.0) * radius_i - depth_i))
+        .max(T::splat(0.0))
+        .sqrt();
+    DiscChord {
+        normal,
+        overlap,
+        depth_i,
+        depth_j,
+        half_chord,
+    }
+}
+
+/// Whether a chord of half length `half_chord` is too short to be a contact of circles of
+/// radii summing to `reach` (its crossing points coincide to rounding).
+#[inline(always)]
+pub fn degenerate_chord(half_chord: f64, reach: f64) -> bool {
+    half_chord <= 0.5 * f64::EPSILON * reach
 }
 
 /// Contact of the circle (centre `center_i`, radius `radius_i`) with the circle
@@ -74,26 +141,20 @@ pub fn disc_disc(center_i: DVec2, radius_i: f64, center_j: DVec2, radius_j: f64)
         // One circle inside the other: no crossing points (SPEC §9).
         return Overlap::Swallowed;
     }
-    let normal = branch / distance;
-    let overlap = reach - distance;
-    // Depths of the two caps below the circles' outermost points along the normal, each
-    // written as a product so that shallow contacts keep their precision:
-    // `R_i - a = overlap (d + R_j - R_i) / (2 d)`, a the chord's distance from i's centre.
-    let inv_two_distance = 0.5 / distance;
-    let depth_i = overlap * (distance + radius_j - radius_i) * inv_two_distance;
-    let depth_j = overlap * (distance + radius_i - radius_j) * inv_two_distance;
-    let half_chord = (depth_i * (2.0 * radius_i - depth_i)).max(0.0).sqrt();
-    if half_chord <= 0.5 * f64::EPSILON * reach {
+    let chord = disc_chord(branch.into(), distance, radius_i, radius_j, reach);
+    let half_chord = chord.half_chord;
+    if degenerate_chord(half_chord, reach) {
         return Overlap::Separate;
     }
-    let (distance_i, distance_j) = (radius_i - depth_i, radius_j - depth_j);
+    let normal = DVec2::from(chord.normal);
+    let (distance_i, distance_j) = (radius_i - chord.depth_i, radius_j - chord.depth_j);
     Overlap::Contact(ContactGeometry {
         point: center_i + distance_i * normal,
         normal,
         length: 2.0 * half_chord,
         cap_area_i: chord_segment_area(radius_i, distance_i, half_chord),
         cap_area_j: chord_segment_area(radius_j, distance_j, half_chord),
-        normal_gap: -0.5 * overlap,
+        normal_gap: -0.5 * chord.overlap,
     })
 }
 

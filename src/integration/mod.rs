@@ -19,6 +19,7 @@
 //! was built.
 
 pub mod instability;
+mod pairs;
 pub mod parameters;
 
 pub use instability::Instability;
@@ -26,10 +27,9 @@ pub use parameters::Parameters;
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
-use crate::contact::friction::TangentialResponse;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
-use crate::geometry::circle::{disc_disc, disc_wall};
+use crate::geometry::circle::disc_wall;
 use crate::geometry::contour::QUARTER_TURN;
 use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::grain::adaptive::stress_invariants;
@@ -664,17 +664,17 @@ impl World {
 
     /// Contact geometry and forces of every candidate pair, and their sums.
     fn compute_pair_contacts(&mut self) -> Result<PairSums, Instability> {
-        let params = &self.params;
-        let contours = &self.contours;
-        let frames = &self.frames;
-        let pairs = &self.neighbors.pairs;
-        let images = &self.neighbors.images;
-        let step = self.step;
-        // In a periodic cell: the cell, and the velocity gradient of the affine field, which
-        // adds `L d` to the relative velocity of a pair of branch vector d.
-        let periodic = self
-            .periodic
-            .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)));
+        let pass = pairs::PairPass {
+            params: &self.params,
+            contours: &self.contours,
+            frames: &self.frames,
+            pairs: &self.neighbors.pairs,
+            images: &self.neighbors.images,
+            step: self.step,
+            periodic: self
+                .periodic
+                .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
+        };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,
             &mut self.pair_state,
@@ -684,136 +684,7 @@ impl World {
         let chunk_results: Vec<PairSums> = chunks
             .into_par_iter()
             .map(|(first_pair, states, actives, records)| {
-                let mut capped = 0;
-                let mut moment = [0.0; 3];
-                let mut failure = None;
-                let mut dissipation = 0.0;
-                let mut sliding = 0;
-                for (k, ((state, active), record)) in states
-                    .iter_mut()
-                    .zip(actives.iter_mut())
-                    .zip(records.iter_mut())
-                    .enumerate()
-                {
-                    let p = first_pair + k;
-                    if let Some(&[_, ahead]) = pairs.get(p + PREFETCH_AHEAD) {
-                        prefetch(&frames[ahead as usize]);
-                    }
-                    let [i, j] = pairs[p];
-                    let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
-                    // The centre of the second grain, or of its image that meets the first.
-                    let mut center_j = fj.center;
-                    // In a periodic cell: the branch vector, and the affine field's `L d`.
-                    let mut branch = DVec2::ZERO;
-                    let mut affine_rate = DVec2::ZERO;
-                    if let Some((cell, velocity_gradient)) = &periodic {
-                        center_j += cell.image_shift(images[p]);
-                        branch = center_j - fi.center;
-                        affine_rate = *velocity_gradient * branch;
-                    }
-                    let mut hint = state.hint;
-                    let history = state.tangential_history;
-                    let overlap = if fi.circle && fj.circle {
-                        disc_disc(fi.center, fi.bounding_radius, center_j, fj.bounding_radius)
-                    } else {
-                        let shape_j = GrainShape {
-                            center: center_j,
-                            ..fj.shape()
-                        };
-                        contours.grain_grain(&fi.shape(), &shape_j, &mut hint)
-                    };
-                    // An open or failed pair keeps only its search hint (its spring resets);
-                    // a contact writes its record too.
-                    let touches = match overlap {
-                        Overlap::Separate => false,
-                        Overlap::Swallowed => {
-                            failure.get_or_insert(Instability::Swallowed {
-                                step,
-                                grain: i as usize,
-                                other: Some(j as usize),
-                            });
-                            false
-                        }
-                        Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
-                            Err(exit) => {
-                                failure.get_or_insert(Instability::ContactDomain {
-                                    step,
-                                    grain: i as usize,
-                                    other: Some(j as usize),
-                                    length: exit.length,
-                                    normal_gap: exit.normal_gap,
-                                });
-                                false
-                            }
-                            Ok(response) => {
-                                let velocity_j =
-                                    fj.velocity + fj.velocity_gradient() * (c.point - center_j);
-                                let relative_velocity =
-                                    velocity_j - fi.velocity_at(c.point) + affine_rate;
-                                let gap_rate = relative_velocity.dot(c.normal);
-                                let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
-                                capped += response.capped as u64;
-                                let force = damped_normal_force(
-                                    response.force,
-                                    response.stiffness,
-                                    effective_mass,
-                                    params.contact_damping,
-                                    gap_rate,
-                                );
-                                let tangential = match &params.friction {
-                                    Some(friction) if friction.grains > 0.0 => {
-                                        friction.law.response(
-                                            history,
-                                            response.stiffness,
-                                            force,
-                                            relative_velocity.dot(c.normal.perp()),
-                                            friction.grains,
-                                            effective_mass,
-                                            params.dt,
-                                        )
-                                    }
-                                    _ => TangentialResponse::default(),
-                                };
-                                dissipation += tangential.dissipated;
-                                sliding += tangential.sliding as u64;
-                                *record = PairContact {
-                                    normal: c.normal,
-                                    force,
-                                    tangential_force: tangential.force,
-                                    point: c.point,
-                                    cap_area_first: c.cap_area_i,
-                                    cap_area_second: c.cap_area_j,
-                                };
-                                *state = PairState {
-                                    hint,
-                                    tangential_history: tangential.history,
-                                    contact_length: c.length,
-                                };
-                                if periodic.is_some() {
-                                    let share = symmetric_dyad(record.force_on_first(), branch);
-                                    for (sum, x) in moment.iter_mut().zip(share) {
-                                        *sum += x;
-                                    }
-                                }
-                                true
-                            }
-                        },
-                    };
-                    *active = touches;
-                    if !touches {
-                        *state = PairState {
-                            hint,
-                            ..Default::default()
-                        };
-                    }
-                }
-                PairSums {
-                    capped,
-                    moment,
-                    dissipation,
-                    sliding,
-                    failure,
-                }
+                pass.chunk(first_pair, states, actives, records)
             })
             .collect();
         let mut totals = PairSums::default();
@@ -1199,9 +1070,6 @@ fn pair_chunks<'a>(
     }
     chunks
 }
-
-/// How many pairs ahead the pair pass asks for the second grain's frame.
-const PREFETCH_AHEAD: usize = 8;
 
 /// Asks the processor to bring `value`'s first cache line in: a hint, no effect on results.
 #[inline(always)]

@@ -1,0 +1,699 @@
+//! The pair pass of the step: the contact geometry and force of every candidate pair, written to
+//! the pair's own slot, and the sums over a chunk's contacts in pair order.
+//!
+//! Pairs of two circles (rigid discs, or discs held at a volumetric strain) take the closed
+//! forms of [`circle`](crate::geometry::circle); where four consecutive pairs of a chunk are all
+//! such pairs, they are computed side by side in the [lanes](crate::lanes) of one kernel
+//! ([`disc_pair_forces`]), which vector instructions run four (AVX) or two (SSE2) at a time
+//! (issue #16). Lane by lane, the kernel is the same sequence of operations as the one-pair
+//! path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
+//! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
+//! computed again by the one-pair path, which handles those cases.
+
+use super::{Frame, Instability, PairContact, PairState, PairSums, Parameters, prefetch};
+use crate::boundary::periodic::{PeriodicCell, symmetric_dyad};
+use crate::contact::friction::TangentialResponse;
+use crate::contact::law::{SecantLaw, damped_normal_force};
+use crate::geometry::circle::{
+    degenerate_chord, disc_chord, disc_disc, shallow_cap, shallow_segment_area,
+};
+use crate::geometry::contour::QUARTER_TURN;
+use crate::geometry::intersection::ContactGeometry;
+use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
+use crate::lanes::{Lanes, Real};
+
+/// Pairs of circles computed side by side: four AVX registers' worth (see [`Lanes`]).
+const LANES: usize = 8;
+type PairLanes = Lanes<LANES>;
+use glam::{DMat2, DVec2};
+
+/// How many pairs ahead the pair pass asks for the second grain's frame.
+const PREFETCH_AHEAD: usize = 8;
+
+/// What the pair pass reads, shared by every chunk.
+pub(super) struct PairPass<'a> {
+    pub params: &'a Parameters,
+    pub contours: &'a Contours,
+    pub frames: &'a [Frame],
+    pub pairs: &'a [[u32; 2]],
+    /// Periodic cell only: each pair's image vector.
+    pub images: &'a [[i64; 2]],
+    pub step: u64,
+    /// In a periodic cell: the cell, and the velocity gradient of the affine field, which adds
+    /// `L d` to the relative velocity of a pair of branch vector d.
+    pub periodic: Option<(PeriodicCell, DMat2)>,
+}
+
+/// Where the second grain of a pair is met: the centre of its image that meets the first, the
+/// branch vector (periodic cell only; zero otherwise) and the affine field's `L d`.
+#[derive(Clone, Copy)]
+struct SecondEnd {
+    center: DVec2,
+    branch: DVec2,
+    affine_rate: DVec2,
+}
+
+/// What a pair in contact carries out of its force computation.
+struct Touch {
+    geometry: ContactGeometry,
+    stiffness: f64,
+    capped: bool,
+    /// The normal force, dashpot included.
+    force: f64,
+    relative_velocity: DVec2,
+    effective_mass: f64,
+}
+
+impl PairPass<'_> {
+    /// The pairs of one chunk, the first of which is pair `first_pair`; returns their sums.
+    pub fn chunk(
+        &self,
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
+        let mut sums = PairSums::default();
+        let count = states.len();
+        let mut k = 0;
+        while k < count {
+            let p = first_pair + k;
+            if k + LANES <= count && self.all_circles(p) {
+                for lane in 0..LANES {
+                    self.prefetch_ahead(p + lane);
+                }
+                let block = k..k + LANES;
+                self.circle_block(
+                    p,
+                    &mut states[block.clone()],
+                    &mut actives[block.clone()],
+                    &mut records[block],
+                    &mut sums,
+                );
+                k += LANES;
+            } else {
+                self.prefetch_ahead(p);
+                self.one_pair(
+                    p,
+                    &mut states[k],
+                    &mut actives[k],
+                    &mut records[k],
+                    &mut sums,
+                );
+                k += 1;
+            }
+        }
+        sums
+    }
+
+    #[inline(always)]
+    fn prefetch_ahead(&self, p: usize) {
+        if let Some(&[_, ahead]) = self.pairs.get(p + PREFETCH_AHEAD) {
+            prefetch(&self.frames[ahead as usize]);
+        }
+    }
+
+    /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
+    #[inline(always)]
+    fn all_circles(&self, p: usize) -> bool {
+        self.pairs[p..p + LANES]
+            .iter()
+            .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
+    }
+
+    #[inline(always)]
+    fn second_end(&self, p: usize, first: &Frame, second: &Frame) -> SecondEnd {
+        let mut end = SecondEnd {
+            center: second.center,
+            branch: DVec2::ZERO,
+            affine_rate: DVec2::ZERO,
+        };
+        if let Some((cell, velocity_gradient)) = &self.periodic {
+            end.center += cell.image_shift(self.images[p]);
+            end.branch = end.center - first.center;
+            end.affine_rate = *velocity_gradient * end.branch;
+        }
+        end
+    }
+
+    /// Pair `p` on its own: any pair of grains, any case.
+    #[inline(always)]
+    fn one_pair(
+        &self,
+        p: usize,
+        state: &mut PairState,
+        active: &mut bool,
+        record: &mut PairContact,
+        sums: &mut PairSums,
+    ) {
+        let [i, j] = self.pairs[p];
+        let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
+        let end = self.second_end(p, fi, fj);
+        let mut hint = state.hint;
+        let overlap = if fi.circle && fj.circle {
+            disc_disc(
+                fi.center,
+                fi.bounding_radius,
+                end.center,
+                fj.bounding_radius,
+            )
+        } else {
+            let shape_j = GrainShape {
+                center: end.center,
+                ..fj.shape()
+            };
+            self.contours.grain_grain(&fi.shape(), &shape_j, &mut hint)
+        };
+        let touch = match overlap {
+            Overlap::Separate => None,
+            Overlap::Swallowed => {
+                sums.failure.get_or_insert(Instability::Swallowed {
+                    step: self.step,
+                    grain: i as usize,
+                    other: Some(j as usize),
+                });
+                None
+            }
+            Overlap::Contact(c) => match self.params.law.response(c.length, c.normal_gap) {
+                Err(exit) => {
+                    sums.failure.get_or_insert(Instability::ContactDomain {
+                        step: self.step,
+                        grain: i as usize,
+                        other: Some(j as usize),
+                        length: exit.length,
+                        normal_gap: exit.normal_gap,
+                    });
+                    None
+                }
+                Ok(response) => {
+                    let velocity_j = fj.velocity + fj.velocity_gradient() * (c.point - end.center);
+                    let relative_velocity = velocity_j - fi.velocity_at(c.point) + end.affine_rate;
+                    let gap_rate = relative_velocity.dot(c.normal);
+                    let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
+                    let force = damped_normal_force(
+                        response.force,
+                        response.stiffness,
+                        effective_mass,
+                        self.params.contact_damping,
+                        gap_rate,
+                    );
+                    Some(Touch {
+                        geometry: c,
+                        stiffness: response.stiffness,
+                        capped: response.capped,
+                        force,
+                        relative_velocity,
+                        effective_mass,
+                    })
+                }
+            },
+        };
+        self.record(touch, hint, end.branch, state, active, record, sums);
+    }
+
+    /// Writes what pair's step left: for a contact its record, its state (the tangential
+    /// spring) and its share of the sums; for an open or failed pair only its search hint (its
+    /// spring resets).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &self,
+        touch: Option<Touch>,
+        hint: PairHint,
+        branch: DVec2,
+        state: &mut PairState,
+        active: &mut bool,
+        record: &mut PairContact,
+        sums: &mut PairSums,
+    ) {
+        *active = touch.is_some();
+        let Some(touch) = touch else {
+            *state = PairState {
+                hint,
+                ..Default::default()
+            };
+            return;
+        };
+        let c = &touch.geometry;
+        sums.capped += touch.capped as u64;
+        let tangential = match &self.params.friction {
+            Some(friction) if friction.grains > 0.0 => friction.law.response(
+                state.tangential_history,
+                touch.stiffness,
+                touch.force,
+                touch.relative_velocity.dot(c.normal.perp()),
+                friction.grains,
+                touch.effective_mass,
+                self.params.dt,
+            ),
+            _ => TangentialResponse::default(),
+        };
+        sums.dissipation += tangential.dissipated;
+        sums.sliding += tangential.sliding as u64;
+        *record = PairContact {
+            normal: c.normal,
+            force: touch.force,
+            tangential_force: tangential.force,
+            point: c.point,
+            cap_area_first: c.cap_area_i,
+            cap_area_second: c.cap_area_j,
+        };
+        *state = PairState {
+            hint,
+            tangential_history: tangential.history,
+            contact_length: c.length,
+        };
+        if self.periodic.is_some() {
+            let share = symmetric_dyad(record.force_on_first(), branch);
+            for (sum, x) in sums.moment.iter_mut().zip(share) {
+                *sum += x;
+            }
+        }
+    }
+
+    /// `LANES` consecutive pairs of circles from pair `first` on, side by side, then recorded
+    /// one by one in pair order (so that the sums keep their order).
+    #[inline(always)]
+    fn circle_block(
+        &self,
+        first: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+        sums: &mut PairSums,
+    ) {
+        let mut input = DiscPairs::<PairLanes>::default();
+        let ends: [SecondEnd; LANES] = std::array::from_fn(|lane| {
+            let [i, j] = self.pairs[first + lane];
+            let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
+            let end = self.second_end(first + lane, fi, fj);
+            input.set_lane(lane, fi, fj, &end);
+            end
+        });
+        let out = disc_pair_forces_dispatch(&input, &self.params.law, self.params.contact_damping);
+        for (lane, end) in ends.iter().enumerate() {
+            let p = first + lane;
+            let (state, active, record) =
+                (&mut states[lane], &mut actives[lane], &mut records[lane]);
+            let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
+            match out.lane(lane, &radius) {
+                LaneCase::Separate => {
+                    self.record(None, state.hint, end.branch, state, active, record, sums)
+                }
+                LaneCase::Irregular => self.one_pair(p, state, active, record, sums),
+                LaneCase::Contact(touch) => self.record(
+                    Some(touch),
+                    state.hint,
+                    end.branch,
+                    state,
+                    active,
+                    record,
+                    sums,
+                ),
+            }
+        }
+    }
+}
+
+/// What the kernel needs of pairs of circles: lanes of the two circles' centres, radii, masses,
+/// velocities and spins, and the affine field's `L d`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DiscPairs<T> {
+    pub center_i: [T; 2],
+    pub radius_i: T,
+    pub mass_i: T,
+    pub velocity_i: [T; 2],
+    pub omega_i: T,
+    pub center_j: [T; 2],
+    pub radius_j: T,
+    pub mass_j: T,
+    pub velocity_j: [T; 2],
+    pub omega_j: T,
+    pub affine_rate: [T; 2],
+}
+
+impl DiscPairs<PairLanes> {
+    /// Sets lane `lane` to the pair of circles `fi`, `fj`, the second met at `end`.
+    #[inline(always)]
+    fn set_lane(&mut self, lane: usize, fi: &Frame, fj: &Frame, end: &SecondEnd) {
+        let set = |v: &mut PairLanes, x: f64| v.0[lane] = x;
+        set(&mut self.center_i[0], fi.center.x);
+        set(&mut self.center_i[1], fi.center.y);
+        set(&mut self.radius_i, fi.bounding_radius);
+        set(&mut self.mass_i, fi.mass);
+        set(&mut self.velocity_i[0], fi.velocity.x);
+        set(&mut self.velocity_i[1], fi.velocity.y);
+        set(&mut self.omega_i, fi.omega);
+        set(&mut self.center_j[0], end.center.x);
+        set(&mut self.center_j[1], end.center.y);
+        set(&mut self.radius_j, fj.bounding_radius);
+        set(&mut self.mass_j, fj.mass);
+        set(&mut self.velocity_j[0], fj.velocity.x);
+        set(&mut self.velocity_j[1], fj.velocity.y);
+        set(&mut self.omega_j, fj.omega);
+        set(&mut self.affine_rate[0], end.affine_rate.x);
+        set(&mut self.affine_rate[1], end.affine_rate.y);
+    }
+}
+
+/// The contact of each lane's circles computed as if they met in the kernel's regular case;
+/// [`DiscPairForces::lane`] says, lane by lane, whether they do.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DiscPairForces<T> {
+    pub distance_squared: T,
+    pub reach: T,
+    pub distance: T,
+    pub half_chord: T,
+    /// Distances of the chord from the two centres, and `sin theta` of the two caps.
+    pub chord_distance: [T; 2],
+    pub sine: [T; 2],
+    pub normal: [T; 2],
+    pub point: [T; 2],
+    pub cap_area: [T; 2],
+    pub normal_gap: T,
+    pub denominator: T,
+    pub floor: T,
+    pub stiffness: T,
+    pub force: T,
+    pub relative_velocity: [T; 2],
+    pub effective_mass: T,
+}
+
+/// What one lane of [`DiscPairForces`] is.
+enum LaneCase {
+    Separate,
+    /// Not the kernel's regular case: the one-pair path decides.
+    Irregular,
+    Contact(Touch),
+}
+
+impl DiscPairForces<PairLanes> {
+    /// Lane `lane`, whose circles have the radii `radius`: the tests of [`disc_disc`],
+    /// [`chord_segment_area`](crate::geometry::circle::chord_segment_area) and
+    /// [`SecantLaw::response`], in their order.
+    #[inline(always)]
+    fn lane(&self, lane: usize, radius: &[f64; 2]) -> LaneCase {
+        let at = |v: &PairLanes| v.0[lane];
+        let reach = at(&self.reach);
+        if at(&self.distance_squared) >= reach * reach {
+            return LaneCase::Separate;
+        }
+        let regular = at(&self.distance) > (radius[0] - radius[1]).abs()
+            && !degenerate_chord(at(&self.half_chord), reach)
+            && shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
+            && shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
+            && SecantLaw::in_domain(at(&self.denominator), at(&self.floor));
+        if !regular {
+            return LaneCase::Irregular;
+        }
+        let pair = |v: &[PairLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
+        LaneCase::Contact(Touch {
+            geometry: ContactGeometry {
+                point: pair(&self.point),
+                normal: pair(&self.normal),
+                length: 2.0 * at(&self.half_chord),
+                cap_area_i: at(&self.cap_area[0]),
+                cap_area_j: at(&self.cap_area[1]),
+                normal_gap: at(&self.normal_gap),
+            },
+            stiffness: at(&self.stiffness),
+            capped: false,
+            force: at(&self.force),
+            relative_velocity: pair(&self.relative_velocity),
+            effective_mass: at(&self.effective_mass),
+        })
+    }
+}
+
+/// Velocity of the point at `offset` from a circle's centre: `v + omega J offset`, as
+/// [`Frame::velocity_at`] gives it for a circle (the same products, zeros included).
+#[inline(always)]
+fn circle_velocity_at<T: Real>(velocity: [T; 2], omega: T, offset: [T; 2]) -> [T; 2] {
+    let q = |entry: f64| T::splat(entry) * omega;
+    let (xx, xy) = (q(QUARTER_TURN.x_axis.x), q(QUARTER_TURN.x_axis.y));
+    let (yx, yy) = (q(QUARTER_TURN.y_axis.x), q(QUARTER_TURN.y_axis.y));
+    [
+        velocity[0] + (xx * offset[0] + yx * offset[1]),
+        velocity[1] + (xy * offset[0] + yy * offset[1]),
+    ]
+}
+
+/// The closed-form contact and normal force of pairs of circles, all taken as overlapping with
+/// shallow caps and the law in its domain (the regular case; see [`DiscPairForces::lane`]): the
+/// sequence of operations of [`disc_disc`], [`SecantLaw::response`] and
+/// [`damped_normal_force`] in the one-pair path.
+#[inline(always)]
+pub fn disc_pair_forces<T: Real>(
+    input: &DiscPairs<T>,
+    law: &SecantLaw,
+    damping_ratio: f64,
+) -> DiscPairForces<T> {
+    let (ci, cj) = (input.center_i, input.center_j);
+    let (radius_i, radius_j) = (input.radius_i, input.radius_j);
+    let branch = [cj[0] - ci[0], cj[1] - ci[1]];
+    let distance_squared = branch[0] * branch[0] + branch[1] * branch[1];
+    let reach = radius_i + radius_j;
+    let distance = distance_squared.sqrt();
+    let chord = disc_chord(branch, distance, radius_i, radius_j, reach);
+    let half_chord = chord.half_chord;
+    let normal = chord.normal;
+    let chord_distance = [radius_i - chord.depth_i, radius_j - chord.depth_j];
+    let sine = [half_chord / radius_i, half_chord / radius_j];
+    let cap_area = [
+        shallow_segment_area(radius_i, sine[0]),
+        shallow_segment_area(radius_j, sine[1]),
+    ];
+    let point = [
+        ci[0] + chord_distance[0] * normal[0],
+        ci[1] + chord_distance[0] * normal[1],
+    ];
+    let length = T::splat(2.0) * half_chord;
+    let normal_gap = T::splat(-0.5) * chord.overlap;
+    let (denominator, floor) = law.denominator(length, normal_gap);
+    let stiffness = law.stiffness(length, denominator);
+    let elastic = stiffness * normal_gap;
+    let velocity_j = circle_velocity_at(
+        input.velocity_j,
+        input.omega_j,
+        [point[0] - cj[0], point[1] - cj[1]],
+    );
+    let velocity_i = circle_velocity_at(
+        input.velocity_i,
+        input.omega_i,
+        [point[0] - ci[0], point[1] - ci[1]],
+    );
+    let relative_velocity = [
+        velocity_j[0] - velocity_i[0] + input.affine_rate[0],
+        velocity_j[1] - velocity_i[1] + input.affine_rate[1],
+    ];
+    let gap_rate = relative_velocity[0] * normal[0] + relative_velocity[1] * normal[1];
+    let effective_mass = input.mass_i * input.mass_j / (input.mass_i + input.mass_j);
+    let force = damped_normal_force(
+        elastic,
+        stiffness,
+        effective_mass,
+        T::splat(damping_ratio),
+        gap_rate,
+    );
+    DiscPairForces {
+        distance_squared,
+        reach,
+        distance,
+        half_chord,
+        chord_distance,
+        sine,
+        normal,
+        point,
+        cap_area,
+        normal_gap,
+        denominator,
+        floor,
+        stiffness,
+        force,
+        relative_velocity,
+        effective_mass,
+    }
+}
+
+/// [`disc_pair_forces`] on four lanes, with AVX where the processor has it (chosen at run time:
+/// the same bits either way).
+#[inline(always)]
+fn disc_pair_forces_dispatch(
+    input: &DiscPairs<PairLanes>,
+    law: &SecantLaw,
+    damping_ratio: f64,
+) -> DiscPairForces<PairLanes> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the processor has AVX (tested just above).
+        return unsafe { disc_pair_forces_avx(input, law, damping_ratio) };
+    }
+    disc_pair_forces(input, law, damping_ratio)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn disc_pair_forces_avx(
+    input: &DiscPairs<PairLanes>,
+    law: &SecantLaw,
+    damping_ratio: f64,
+) -> DiscPairForces<PairLanes> {
+    disc_pair_forces(input, law, damping_ratio)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::friction::FrictionSettings;
+    use crate::grain::{Grain, Material};
+    use crate::integration::parameters::Friction;
+    use crate::sample::unit_random;
+    use rand::SeedableRng;
+
+    /// Pairs of circles (grain 2k with grain 2k + 1) at every kind of separation: apart, shallow
+    /// and deep overlaps (caps past the series' range, the law out of its domain), one circle
+    /// swallowing the other, and grazing. The count is not a multiple of the lanes, so that the
+    /// chunk's last pairs take the one-pair path.
+    fn circle_pairs(seed: u64) -> (Vec<Frame>, Vec<[u32; 2]>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut random = |lo: f64, hi: f64| lo + (hi - lo) * unit_random(&mut rng);
+        let separations = [1.2, 1.0 - 1e-15, 0.999, 0.98, 0.9, 0.7, 0.5, 0.25, 0.05];
+        let mut frames = Vec::new();
+        let mut pairs = Vec::new();
+        for k in 0..(10 * LANES + 3) {
+            let grain = |center: DVec2, random: &mut dyn FnMut(f64, f64) -> f64| {
+                let mut g = Grain::at_rest(center, random(0.5, 1.0));
+                let eps = random(-0.05, 0.0);
+                (g.eps1, g.eps2) = (eps, eps);
+                g.velocity = DVec2::new(random(-1.0, 1.0), random(-1.0, 1.0));
+                g.omega = random(-2.0, 2.0);
+                let mut frame = Frame::default();
+                frame.write_circle(&g, random(0.5, 2.0));
+                frame
+            };
+            let first = grain(
+                DVec2::new(random(-5.0, 5.0), random(-5.0, 5.0)),
+                &mut random,
+            );
+            let mut second = grain(DVec2::ZERO, &mut random);
+            // Most blocks hold contacts only; every third holds one of each kind.
+            let separation = if (k / LANES) % 3 == 0 {
+                separations[k % separations.len()]
+            } else {
+                random(0.97, 0.999)
+            };
+            let reach = first.bounding_radius + second.bounding_radius;
+            let angle = random(0.0, std::f64::consts::TAU);
+            second.center = first.center + separation * reach * DVec2::from_angle(angle);
+            frames.extend([first, second]);
+            pairs.push([2 * k as u32, 2 * k as u32 + 1]);
+        }
+        (frames, pairs)
+    }
+
+    fn parameters(friction: bool) -> Parameters {
+        let material = Material {
+            young: 1.0,
+            poisson: 0.5,
+            density: 1.0,
+        };
+        let mut params = Parameters::new(material, 1e-3);
+        if friction {
+            let settings = FrictionSettings {
+                grains: 0.4,
+                damping: 0.3,
+                ..Default::default()
+            };
+            params.friction = Friction::new(&settings, &[0.0; 4]);
+        }
+        params
+    }
+
+    #[test]
+    fn lanes_of_circle_pairs_give_the_one_pair_paths_bits() {
+        // Expectation: the lane kernel is the one-pair path's sequence of operations, and a
+        // lane outside its regular case is handed to that path: every record, state, flag and
+        // sum (the first failure included) is the same, bit for bit, signed zeros included.
+        let contours = Contours::new(1.0);
+        for (seed, friction) in [(1, false), (2, true), (3, false)] {
+            let params = parameters(friction);
+            let (frames, pairs) = circle_pairs(seed);
+            let pass = PairPass {
+                params: &params,
+                contours: &contours,
+                frames: &frames,
+                pairs: &pairs,
+                images: &[],
+                step: 7,
+                periodic: None,
+            };
+            let count = pairs.len();
+            let start: Vec<PairState> = (0..count)
+                .map(|p| PairState {
+                    tangential_history: 1e-3 * (p % 5) as f64 - 2e-3,
+                    ..Default::default()
+                })
+                .collect();
+            let mut lanes = (
+                start.clone(),
+                vec![false; count],
+                vec![PairContact::default(); count],
+            );
+            let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
+            let mut one = (
+                start,
+                vec![false; count],
+                vec![PairContact::default(); count],
+            );
+            let mut one_sums = PairSums::default();
+            for p in 0..count {
+                pass.one_pair(
+                    p,
+                    &mut one.0[p],
+                    &mut one.1[p],
+                    &mut one.2[p],
+                    &mut one_sums,
+                );
+            }
+            assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
+            assert_eq!(
+                format!("{lane_sums:?}"),
+                format!("{one_sums:?}"),
+                "seed {seed}"
+            );
+            // The cases the test means to cover are there.
+            let touching = lanes.1.iter().filter(|&&a| a).count();
+            assert!(
+                touching > count / 2 && touching < count,
+                "{touching} of {count}"
+            );
+            assert!(
+                lane_sums.failure.is_some(),
+                "a swallowed or out-of-domain pair"
+            );
+            if friction {
+                assert!(lane_sums.sliding > 0 && lane_sums.sliding < touching as u64);
+            }
+        }
+    }
+
+    #[test]
+    fn the_vector_kernel_is_the_portable_one_bit_for_bit() {
+        // Expectation: the run-time choice of instructions (AVX or SSE2) changes no bit.
+        let params = parameters(false);
+        let (frames, pairs) = circle_pairs(4);
+        let mut input = DiscPairs::<PairLanes>::default();
+        for (lane, &[i, j]) in pairs.iter().take(LANES).enumerate() {
+            let (fi, fj) = (&frames[i as usize], &frames[j as usize]);
+            let end = SecondEnd {
+                center: fj.center,
+                branch: DVec2::ZERO,
+                affine_rate: DVec2::new(1e-3, -2e-3),
+            };
+            input.set_lane(lane, fi, fj, &end);
+        }
+        let portable = disc_pair_forces(&input, &params.law, params.contact_damping);
+        let chosen = disc_pair_forces_dispatch(&input, &params.law, params.contact_damping);
+        assert_eq!(format!("{portable:?}"), format!("{chosen:?}"));
+    }
+}

@@ -1,0 +1,186 @@
+//! Kernels written once for one value and for four: the [`Real`] arithmetic they use, for `f64`
+//! and for [`Lanes`], `N` independent `f64` lanes (issue #16).
+//!
+//! A formula written over `T: Real` gives, lane by lane, the same bits as over `f64`: every
+//! operation here is a correctly rounded IEEE operation (`+ - * /`, `sqrt`) or a comparison
+//! (`min`, `max`, `abs`), applied in the order the formula states; nothing fuses a multiply and
+//! an add (Rust never contracts floating-point expressions). The compiler turns the lanes into
+//! vector instructions where the target has them (SSE2 everywhere on x86-64, AVX where a caller
+//! enables it at run time), which changes the speed, never the results.
+
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// The arithmetic a lane kernel needs.
+pub trait Real:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// The same value in every lane.
+    fn splat(value: f64) -> Self;
+    fn sqrt(self) -> Self;
+    /// As [`f64::max`] (a NaN takes the other operand), and `other` where the two are equal:
+    /// `f64::max` leaves the sign of `max(-0, +0)` to the instructions the compiler picks, which
+    /// differ between one lane and a vector of them.
+    fn max(self, other: Self) -> Self;
+    /// As [`f64::min`], and `other` where the two are equal (see [`Real::max`]).
+    fn min(self, other: Self) -> Self;
+}
+
+/// [`Real::max`] of one lane: a select, the same in scalar and vector instructions.
+#[inline(always)]
+fn lane_max(a: f64, b: f64) -> f64 {
+    if b.is_nan() || a > b { a } else { b }
+}
+
+/// [`Real::min`] of one lane.
+#[inline(always)]
+fn lane_min(a: f64, b: f64) -> f64 {
+    if b.is_nan() || a < b { a } else { b }
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn splat(value: f64) -> Self {
+        value
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        lane_max(self, other)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        lane_min(self, other)
+    }
+}
+
+/// `N` independent `f64` lanes, operated on lane by lane. Several vector registers' worth of
+/// lanes (`N` = 8 or 16 with AVX's four) keep the processor busy through the long latencies of
+/// division and square root: one register's four lanes would wait on each other's chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(32))]
+pub struct Lanes<const N: usize>(pub [f64; N]);
+
+impl<const N: usize> Default for Lanes<N> {
+    fn default() -> Self {
+        Lanes([0.0; N])
+    }
+}
+
+impl<const N: usize> Lanes<N> {
+    /// The lanes `f(0), f(1), ..., f(N - 1)`.
+    #[inline(always)]
+    pub fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+        Lanes(std::array::from_fn(f))
+    }
+
+    #[inline(always)]
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        let mut out = self.0;
+        for x in out.iter_mut() {
+            *x = f(*x);
+        }
+        Lanes(out)
+    }
+
+    #[inline(always)]
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        let mut out = self.0;
+        for (x, y) in out.iter_mut().zip(other.0) {
+            *x = f(*x, y);
+        }
+        Lanes(out)
+    }
+}
+
+macro_rules! lane_operator {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<const N: usize> $trait for Lanes<N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, other: Self) -> Self {
+                self.zip(other, |a, b| a $op b)
+            }
+        }
+    };
+}
+
+lane_operator!(Add, add, +);
+lane_operator!(Sub, sub, -);
+lane_operator!(Mul, mul, *);
+lane_operator!(Div, div, /);
+
+impl<const N: usize> Neg for Lanes<N> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        self.map(|a| -a)
+    }
+}
+
+impl<const N: usize> Real for Lanes<N> {
+    #[inline(always)]
+    fn splat(value: f64) -> Self {
+        Lanes([value; N])
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        self.map(f64::sqrt)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        self.zip(other, lane_max)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        self.zip(other, lane_min)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_lane_gives_the_bits_of_its_scalar_operation() {
+        // Expectation: the lanes are four scalar computations side by side, NaN and signed
+        // zeros included (max and min of -0 and +0 too: lane 1).
+        let a = [1.5, -0.0, f64::NAN, 3.0e-300];
+        let b = [0.1, 0.0, 2.0, -7.25];
+        let (x, y) = (Lanes(a), Lanes(b));
+        let lanes = [
+            (x + y).0,
+            (x - y).0,
+            (x * y).0,
+            (x / y).0,
+            (-x).0,
+            x.sqrt().0,
+            x.max(y).0,
+            x.min(y).0,
+        ];
+        for l in 0..4 {
+            let scalar = [
+                a[l] + b[l],
+                a[l] - b[l],
+                a[l] * b[l],
+                a[l] / b[l],
+                -a[l],
+                a[l].sqrt(),
+                Real::max(a[l], b[l]),
+                Real::min(a[l], b[l]),
+            ];
+            for (lane, one) in lanes.iter().zip(scalar) {
+                // NaN payloads are not part of IEEE's results; a NaN must stay a NaN.
+                let same = lane[l].to_bits() == one.to_bits() || (lane[l].is_nan() && one.is_nan());
+                assert!(same, "lane {l}: {} against {one}", lane[l]);
+            }
+        }
+    }
+}
