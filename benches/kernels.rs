@@ -174,3 +174,81 @@ fn neighbor_list_build(bencher: divan::Bencher, grains: usize) {
             list.build(black_box(&centers), black_box(&reach));
         });
 }
+
+/// Eight pairs of rigid discs at once (issue #16, tenth session): the lane kernel of the pair
+/// pass, with the vector instructions the processor has, against the same eight pairs one by
+/// one through `disc_disc`, the law and the dashpot (the one-pair path). Counted in pairs.
+mod disc_pairs {
+    use glam::DVec2;
+    use sdem::contact::law::{SecantLaw, damped_normal_force};
+    use sdem::geometry::Overlap;
+    use sdem::integration::pairs::{DiscPairs, LANES, PairLanes, disc_pair_forces_dispatch};
+    use std::hint::black_box;
+
+    fn pairs() -> DiscPairs<PairLanes> {
+        let lanes = |f: fn(usize) -> f64| PairLanes::from_fn(f);
+        DiscPairs {
+            center_i: [lanes(|l| 0.03 * l as f64), lanes(|_| 0.0)],
+            radius_i: lanes(|_| 0.012),
+            mass_i: lanes(|_| 4.5e-4),
+            velocity_i: [lanes(|l| 1e-3 * l as f64), lanes(|_| 0.0)],
+            omega_i: lanes(|_| 0.1),
+            center_j: [
+                lanes(|l| 0.03 * l as f64 + 0.0238 - 1e-4 * l as f64),
+                lanes(|l| 1e-3 * l as f64),
+            ],
+            radius_j: lanes(|_| 0.0121),
+            mass_j: lanes(|_| 4.6e-4),
+            velocity_j: [lanes(|_| 0.0), lanes(|l| -1e-3 * l as f64)],
+            omega_j: lanes(|_| -0.2),
+            affine_rate: [lanes(|_| 0.0), lanes(|_| 0.0)],
+        }
+    }
+
+    #[divan::bench]
+    fn eight_in_lanes(bencher: divan::Bencher) {
+        let (input, law) = (pairs(), SecantLaw::new(1.0, 0.58, 2.0));
+        bencher
+            .counter(divan::counter::ItemsCount::new(LANES))
+            .bench(|| disc_pair_forces_dispatch(black_box(&input), &law, 1.0));
+    }
+
+    #[divan::bench]
+    fn eight_one_by_one(bencher: divan::Bencher) {
+        let (input, law) = (pairs(), SecantLaw::new(1.0, 0.58, 2.0));
+        bencher
+            .counter(divan::counter::ItemsCount::new(LANES))
+            .bench(|| {
+                let input = black_box(&input);
+                let mut forces = [0.0; LANES];
+                for (l, force) in forces.iter_mut().enumerate() {
+                    let at = |v: &PairLanes| v.0[l];
+                    let (ci, cj) = (
+                        DVec2::new(at(&input.center_i[0]), at(&input.center_i[1])),
+                        DVec2::new(at(&input.center_j[0]), at(&input.center_j[1])),
+                    );
+                    let contact = sdem::geometry::circle::disc_disc(
+                        ci,
+                        at(&input.radius_i),
+                        cj,
+                        at(&input.radius_j),
+                    );
+                    if let Overlap::Contact(c) = contact {
+                        let r = law.response(c.length, c.normal_gap).unwrap();
+                        let vi = DVec2::new(at(&input.velocity_i[0]), at(&input.velocity_i[1]));
+                        let vj = DVec2::new(at(&input.velocity_j[0]), at(&input.velocity_j[1]));
+                        let (mi, mj) = (at(&input.mass_i), at(&input.mass_j));
+                        let gap_rate = (vj - vi).dot(c.normal);
+                        *force = damped_normal_force(
+                            r.force,
+                            r.stiffness,
+                            mi * mj / (mi + mj),
+                            1.0,
+                            gap_rate,
+                        );
+                    }
+                }
+                forces
+            });
+    }
+}

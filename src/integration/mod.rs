@@ -19,7 +19,7 @@
 //! was built.
 
 pub mod instability;
-mod pairs;
+pub mod pairs;
 pub mod parameters;
 
 pub use instability::Instability;

@@ -22,9 +22,10 @@ use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
 
-/// Pairs of circles computed side by side: four AVX registers' worth (see [`Lanes`]).
-const LANES: usize = 8;
-type PairLanes = Lanes<LANES>;
+/// Pairs of circles computed side by side: two AVX registers' worth (see [`Lanes`]; 8 and 16
+/// lanes time alike, 32 slower).
+pub const LANES: usize = 8;
+pub type PairLanes = Lanes<LANES>;
 use glam::{DMat2, DVec2};
 
 /// How many pairs ahead the pair pass asks for the second grain's frame.
@@ -518,7 +519,7 @@ pub fn disc_pair_forces<T: Real>(
 /// [`disc_pair_forces`] on four lanes, with AVX where the processor has it (chosen at run time:
 /// the same bits either way).
 #[inline(always)]
-fn disc_pair_forces_dispatch(
+pub fn disc_pair_forces_dispatch(
     input: &DiscPairs<PairLanes>,
     law: &SecantLaw,
     damping_ratio: f64,
