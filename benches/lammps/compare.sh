@@ -3,12 +3,14 @@
 # LAMMPS gran/hooke (1 and 2 processes) and `sdem bench` (full and rigid, 1 and 2 threads).
 #   usage: benches/lammps/compare.sh N LAMMPS_STEPS SDEM_STEPS [ROUNDS] [path/to/sdem]
 #   e.g.   benches/lammps/compare.sh 100000 1000 100 3
+# WARMUP=K (default 20) gives sdem bench K untimed steps first (see `sdem bench --help`).
 # Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
 # packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/.
 set -eu
 here=$(cd "$(dirname "$0")" && pwd)
 n=$1; lsteps=$2; ssteps=$3; rounds=${4:-3}
 sdem=$(realpath "${5:-$here/../../target/release/sdem}")
+warmup=${WARMUP:-20}
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
 [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
@@ -22,7 +24,7 @@ for r in $(seq 1 "$rounds"); do
   done
   for model in full rigid; do
     for t in 1 2; do
-      out=$("$sdem" bench --grains "$n" --steps "$ssteps" --threads "$t" --model "$model")
+      out=$("$sdem" bench --grains "$n" --steps "$ssteps" --warmup "$warmup" --threads "$t" --model "$model")
       echo "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
     done
   done
