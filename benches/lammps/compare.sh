@@ -4,6 +4,9 @@
 #   usage: benches/lammps/compare.sh N LAMMPS_STEPS SDEM_STEPS [ROUNDS] [path/to/sdem]
 #   e.g.   benches/lammps/compare.sh 100000 1000 100 3
 # WARMUP=K (default 20) gives sdem bench K untimed steps first (see `sdem bench --help`).
+# SAME_PACKING=1 also times sdem's rigid discs on LAMMPS's own packing, in its periodic box
+# (to_sdem.py; "model=rigid-lammps-packing"): the same discs and contacts, where the lattice of
+# `sdem bench` has 6 contacts a grain and LAMMPS's packing about 4.15.
 # Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
 # packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/.
 set -eu
@@ -16,6 +19,10 @@ mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compre
 [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
 [ -f dense_$n.data ] || mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
   -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
+if [ "${SAME_PACKING:-0}" = 1 ] && [ ! -f sdem_$n/checkpoint.bin ]; then
+  python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
+  "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
+fi
 for r in $(seq 1 "$rounds"); do
   for np in 1 2; do
     pre=""; [ "$np" = 2 ] && pre="mpirun --allow-run-as-root -np 2"
@@ -28,4 +35,10 @@ for r in $(seq 1 "$rounds"); do
       echo "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
     done
   done
+  if [ "${SAME_PACKING:-0}" = 1 ]; then
+    for t in 1 2; do
+      out=$("$sdem" bench --from sdem_$n/checkpoint.bin --steps "$ssteps" --warmup "$warmup" --threads "$t")
+      echo "sdem model=rigid-lammps-packing threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+    done
+  fi
 done

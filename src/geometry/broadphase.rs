@@ -114,15 +114,29 @@ impl NeighborList {
         limit: f64,
         displacement: impl Fn(DVec2, DVec2) -> f64 + Sync,
     ) -> bool {
+        // Whole chunks, each a plain loop without an exit: nearly every step tests every grain
+        // and finds none, and a short-circuiting parallel `any` paid its plumbing per grain
+        // (issue #16: 330 instructions a grain-step in a periodic cell).
+        const CHUNK: usize = 4096;
         centers
-            .par_iter()
-            .zip(reach.par_iter())
+            .par_chunks(CHUNK)
+            .zip(reach.par_chunks(CHUNK))
             .zip(
                 self.reference_centers
-                    .par_iter()
-                    .zip(self.reference_reach.par_iter()),
+                    .par_chunks(CHUNK)
+                    .zip(self.reference_reach.par_chunks(CHUNK)),
             )
-            .any(|((c, r), (c0, r0))| displacement(*c, *c0) + (r - r0).max(0.0) >= limit)
+            .any(|((centers, reach), (references, reference_reach))| {
+                let mut moved = false;
+                for ((c, r), (c0, r0)) in centers
+                    .iter()
+                    .zip(reach)
+                    .zip(references.iter().zip(reference_reach))
+                {
+                    moved |= displacement(*c, *c0) + (r - r0).max(0.0) >= limit;
+                }
+                moved
+            })
     }
 
     /// The periodic version of [`needs_rebuild`](Self::needs_rebuild), for a cell that deforms.
@@ -155,7 +169,7 @@ impl NeighborList {
         // shift (a grain may have been wrapped since).
         self.any_moved(centers, reach, budget, |c, s0| {
             let ds = cell.reduced(c) - s0;
-            (cell.matrix() * (ds - ds.round())).length()
+            (cell.matrix() * (ds - nearest_integer(ds))).length()
         })
     }
 
@@ -392,6 +406,16 @@ impl NeighborList {
     }
 }
 
+/// The nearest integers to `v`'s components (ties to even), for components of magnitude below
+/// 2^51: adding and subtracting 1.5 * 2^52 leaves the rounded value, in two additions where
+/// `f64::round` is a library call on x86-64 without SSE4.1 (the rebuild test calls it for every
+/// grain and step of a periodic cell). Only the choice of lattice shift rests on it.
+#[inline(always)]
+fn nearest_integer(v: DVec2) -> DVec2 {
+    const SHIFT: f64 = 6_755_399_441_055_744.0;
+    DVec2::new((v.x + SHIFT) - SHIFT, (v.y + SHIFT) - SHIFT)
+}
+
 /// The largest of the bounding radii (0 for none), in parallel: max is exact, so the result
 /// does not depend on how the threads split the slice. A serial fold was a step's only serial
 /// pass over the grains while a box moves affinely.
@@ -426,6 +450,25 @@ fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Ve
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_integer_matches_round_except_at_ties() {
+        // Expectation: the nearest integer, as f64::round gives it wherever the two roundings
+        // agree (everywhere but exact halves), negative values and large magnitudes included.
+        let mut x = -3.7e9;
+        while x < 3.7e9 {
+            for v in [x, x * 1e-9, -x * 1e-7, x + 0.49, x - 0.51] {
+                let got = nearest_integer(DVec2::new(v, -v));
+                assert_eq!((got.x, got.y), (v.round(), (-v).round()), "{v}");
+            }
+            x += 1.234567e7;
+        }
+        // Ties go to the even neighbour; either is a valid lattice shift there.
+        assert_eq!(
+            nearest_integer(DVec2::new(0.5, -2.5)),
+            DVec2::new(0.0, -2.0)
+        );
+    }
 
     #[test]
     fn finds_exactly_the_pairs_of_a_brute_force_search() {
