@@ -3,7 +3,8 @@
 //!
 //! One step is three parallel passes, each deterministic whatever the thread count:
 //! 1. per grain: its shape and velocity field (`frames`);
-//! 2. per candidate pair: contact geometry and force, written to the pair's own slot;
+//! 2. per candidate pair: contact geometry and force, written to the pair's own slot
+//!    ([`pairs`]: circles eight pairs at a time);
 //! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update;
 //! 4. in a periodic cell (SPEC §14), per grain: carried by the cell's affine deformation over the
 //!    step and wrapped back into the cell (`World::follow_cell`).

@@ -2,8 +2,8 @@
 //! the pair's own slot, and the sums over a chunk's contacts in pair order.
 //!
 //! Pairs of two circles (rigid discs, or discs held at a volumetric strain) take the closed
-//! forms of [`circle`](crate::geometry::circle); where four consecutive pairs of a chunk are all
-//! such pairs, they are computed side by side in the [lanes](crate::lanes) of one kernel
+//! forms of [`circle`](crate::geometry::circle); where [`LANES`] consecutive pairs of a chunk are
+//! all such pairs, they are computed side by side in the [lanes](crate::lanes) of one kernel
 //! ([`disc_pair_forces`]), which vector instructions run four (AVX) or two (SSE2) at a time
 //! (issue #16). Lane by lane, the kernel is the same sequence of operations as the one-pair
 //! path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
@@ -21,12 +21,13 @@ use crate::geometry::contour::QUARTER_TURN;
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
+use glam::{DMat2, DVec2};
 
 /// Pairs of circles computed side by side: two AVX registers' worth (see [`Lanes`]; 8 and 16
 /// lanes time alike, 32 slower).
 pub const LANES: usize = 8;
+/// The lanes of [`LANES`] pairs.
 pub type PairLanes = Lanes<LANES>;
-use glam::{DMat2, DVec2};
 
 /// How many pairs ahead the pair pass asks for the second grain's frame.
 const PREFETCH_AHEAD: usize = 8;
@@ -212,7 +213,7 @@ impl PairPass<'_> {
         self.record(touch, hint, end.branch, state, active, record, sums);
     }
 
-    /// Writes what pair's step left: for a contact its record, its state (the tangential
+    /// Writes what the pair's step left: for a contact its record, its state (the tangential
     /// spring) and its share of the sums; for an open or failed pair only its search hint (its
     /// spring resets).
     #[inline(always)]
