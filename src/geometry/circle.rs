@@ -117,6 +117,20 @@ pub fn disc_chord<T: Real>(
     }
 }
 
+/// Whether circles whose centres lie `sqrt(distance_squared)` apart and whose radii sum to
+/// `reach` do not overlap.
+#[inline(always)]
+pub fn discs_apart(distance_squared: f64, reach: f64) -> bool {
+    distance_squared >= reach * reach
+}
+
+/// Whether one of two circles (radii `radius_i`, `radius_j`, centres `distance` apart) lies
+/// inside the other: no crossing points (SPEC §9).
+#[inline(always)]
+pub fn disc_swallowed(distance: f64, radius_i: f64, radius_j: f64) -> bool {
+    distance <= (radius_i - radius_j).abs()
+}
+
 /// Whether a chord of half length `half_chord` is too short to be a contact of circles of
 /// radii summing to `reach` (its crossing points coincide to rounding).
 #[inline(always)]
@@ -133,12 +147,11 @@ pub fn disc_disc(center_i: DVec2, radius_i: f64, center_j: DVec2, radius_j: f64)
     let branch = center_j - center_i;
     let distance_squared = branch.length_squared();
     let reach = radius_i + radius_j;
-    if distance_squared >= reach * reach {
+    if discs_apart(distance_squared, reach) {
         return Overlap::Separate;
     }
     let distance = distance_squared.sqrt();
-    if distance <= (radius_i - radius_j).abs() {
-        // One circle inside the other: no crossing points (SPEC §9).
+    if disc_swallowed(distance, radius_i, radius_j) {
         return Overlap::Swallowed;
     }
     let chord = disc_chord(branch.into(), distance, radius_i, radius_j, reach);

@@ -36,6 +36,7 @@ use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::grain::adaptive::stress_invariants;
 use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
+use crate::lanes::Real;
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
@@ -147,8 +148,33 @@ impl Frame {
     /// Velocity of the material point of this grain at x.
     #[inline]
     pub fn velocity_at(&self, x: DVec2) -> DVec2 {
-        self.velocity + self.velocity_gradient() * (x - self.center)
+        self.velocity_at_offset(x - self.center)
     }
+
+    /// Velocity of the material point of this grain at `offset` from its centre (or from the
+    /// centre of the image that meets another grain).
+    #[inline]
+    pub fn velocity_at_offset(&self, offset: DVec2) -> DVec2 {
+        if self.circle {
+            circle_velocity_at(self.velocity.into(), self.omega, offset.into()).into()
+        } else {
+            self.velocity + self.velocity_gradient * offset
+        }
+    }
+}
+
+/// Velocity of the point at `offset` from a circle's centre, `v + omega J offset`: the products
+/// of `(omega J) offset` (see [`QUARTER_TURN`]), zeros included, written once for one circle
+/// and for [lanes](crate::lanes) of them.
+#[inline(always)]
+pub(crate) fn circle_velocity_at<T: Real>(velocity: [T; 2], omega: T, offset: [T; 2]) -> [T; 2] {
+    let q = |entry: f64| T::splat(entry) * omega;
+    let (xx, xy) = (q(QUARTER_TURN.x_axis.x), q(QUARTER_TURN.x_axis.y));
+    let (yx, yy) = (q(QUARTER_TURN.y_axis.x), q(QUARTER_TURN.y_axis.y));
+    [
+        velocity[0] + (xx * offset[0] + yx * offset[1]),
+        velocity[1] + (xy * offset[0] + yy * offset[1]),
+    ]
 }
 
 /// What the pair pass keeps of a candidate pair whether it touches or not: what it carries to

@@ -10,14 +10,16 @@
 //! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
 //! computed again by the one-pair path, which handles those cases.
 
-use super::{Frame, Instability, PairContact, PairState, PairSums, Parameters, prefetch};
+use super::{
+    Frame, Instability, PairContact, PairState, PairSums, Parameters, circle_velocity_at, prefetch,
+};
 use crate::boundary::periodic::{PeriodicCell, symmetric_dyad};
 use crate::contact::friction::TangentialResponse;
 use crate::contact::law::{SecantLaw, damped_normal_force};
 use crate::geometry::circle::{
-    degenerate_chord, disc_chord, disc_disc, shallow_cap, shallow_segment_area,
+    degenerate_chord, disc_chord, disc_disc, disc_swallowed, discs_apart, shallow_cap,
+    shallow_segment_area,
 };
-use crate::geometry::contour::QUARTER_TURN;
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -188,7 +190,7 @@ impl PairPass<'_> {
                     None
                 }
                 Ok(response) => {
-                    let velocity_j = fj.velocity + fj.velocity_gradient() * (c.point - end.center);
+                    let velocity_j = fj.velocity_at_offset(c.point - end.center);
                     let relative_velocity = velocity_j - fi.velocity_at(c.point) + end.affine_rate;
                     let gap_rate = relative_velocity.dot(c.normal);
                     let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
@@ -298,21 +300,15 @@ impl PairPass<'_> {
             let (state, active, record) =
                 (&mut states[lane], &mut actives[lane], &mut records[lane]);
             let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
-            match out.lane(lane, &radius) {
-                LaneCase::Separate => {
-                    self.record(None, state.hint, end.branch, state, active, record, sums)
+            let touch = match out.lane(lane, &radius) {
+                LaneCase::Irregular => {
+                    self.one_pair(p, state, active, record, sums);
+                    continue;
                 }
-                LaneCase::Irregular => self.one_pair(p, state, active, record, sums),
-                LaneCase::Contact(touch) => self.record(
-                    Some(touch),
-                    state.hint,
-                    end.branch,
-                    state,
-                    active,
-                    record,
-                    sums,
-                ),
-            }
+                LaneCase::Separate => None,
+                LaneCase::Contact(touch) => Some(touch),
+            };
+            self.record(touch, state.hint, end.branch, state, active, record, sums);
         }
     }
 }
@@ -397,10 +393,10 @@ impl DiscPairForces<PairLanes> {
     fn lane(&self, lane: usize, radius: &[f64; 2]) -> LaneCase {
         let at = |v: &PairLanes| v.0[lane];
         let reach = at(&self.reach);
-        if at(&self.distance_squared) >= reach * reach {
+        if discs_apart(at(&self.distance_squared), reach) {
             return LaneCase::Separate;
         }
-        let regular = at(&self.distance) > (radius[0] - radius[1]).abs()
+        let regular = !disc_swallowed(at(&self.distance), radius[0], radius[1])
             && !degenerate_chord(at(&self.half_chord), reach)
             && shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
             && shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
@@ -425,19 +421,6 @@ impl DiscPairForces<PairLanes> {
             effective_mass: at(&self.effective_mass),
         })
     }
-}
-
-/// Velocity of the point at `offset` from a circle's centre: `v + omega J offset`, as
-/// [`Frame::velocity_at`] gives it for a circle (the same products, zeros included).
-#[inline(always)]
-fn circle_velocity_at<T: Real>(velocity: [T; 2], omega: T, offset: [T; 2]) -> [T; 2] {
-    let q = |entry: f64| T::splat(entry) * omega;
-    let (xx, xy) = (q(QUARTER_TURN.x_axis.x), q(QUARTER_TURN.x_axis.y));
-    let (yx, yy) = (q(QUARTER_TURN.y_axis.x), q(QUARTER_TURN.y_axis.y));
-    [
-        velocity[0] + (xx * offset[0] + yx * offset[1]),
-        velocity[1] + (xy * offset[0] + yy * offset[1]),
-    ]
 }
 
 /// The closed-form contact and normal force of pairs of circles, all taken as overlapping with
