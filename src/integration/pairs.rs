@@ -190,7 +190,7 @@ impl PairPass<'_> {
                     None
                 }
                 Ok(response) => {
-                    let velocity_j = fj.velocity_at_offset(c.point - end.center);
+                    let velocity_j = fj.velocity + fj.velocity_gradient() * (c.point - end.center);
                     let relative_velocity = velocity_j - fi.velocity_at(c.point) + end.affine_rate;
                     let gap_rate = relative_velocity.dot(c.normal);
                     let effective_mass = fi.mass * fj.mass / (fi.mass + fj.mass);
