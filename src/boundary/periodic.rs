@@ -40,6 +40,9 @@ pub struct PeriodicCell {
     pub origin: DVec2,
     matrix: DMat2,
     inverse: DMat2,
+    /// `H (0, 0)` as the product computes it (its zeros' signs follow H's entries): the shift
+    /// of image (0, 0), which nearly every pair has, without the product.
+    zero_shift: DVec2,
 }
 
 impl PeriodicCell {
@@ -59,6 +62,7 @@ impl PeriodicCell {
             origin,
             matrix,
             inverse: matrix.inverse(),
+            zero_shift: matrix * DVec2::ZERO,
         }
     }
 
@@ -135,8 +139,13 @@ impl PeriodicCell {
     }
 
     /// The shift `H n` of image `n`.
+    #[inline]
     pub fn image_shift(&self, n: [i64; 2]) -> DVec2 {
-        self.matrix * DVec2::new(n[0] as f64, n[1] as f64)
+        if n == [0, 0] {
+            self.zero_shift
+        } else {
+            self.matrix * DVec2::new(n[0] as f64, n[1] as f64)
+        }
     }
 
     /// The tilt of h2 along h1 in units of |h1|: 0 for a rectangle, ±1/2 at the remap.

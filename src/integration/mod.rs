@@ -209,13 +209,19 @@ impl PairContact {
     /// The contact force on the pair's first grain (on the second: its opposite).
     #[inline]
     pub fn force_on_first(&self) -> DVec2 {
-        let normal = self.force * self.normal;
+        let normal = self.normal_force_on_first();
         // Frictionless contacts keep the sums of before friction existed, signed zeros included.
         if self.tangential_force == 0.0 {
             normal
         } else {
             normal + self.tangential_force * self.normal.perp()
         }
+    }
+
+    /// The normal part of the force on the first grain: all of it without friction.
+    #[inline]
+    pub fn normal_force_on_first(&self) -> DVec2 {
+        self.force * self.normal
     }
 }
 
@@ -736,6 +742,8 @@ impl World {
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
         let (pair_active, pair_contacts) = (&self.pair_active, &self.pair_contacts);
+        // Only friction between grains gives a pair a tangential force.
+        let frictional_pairs = params.friction.as_ref().is_some_and(|f| f.grains > 0.0);
         let wall_friction = params
             .friction
             .as_ref()
@@ -776,36 +784,11 @@ impl World {
                 {
                     let g = chunk * GRAIN_CHUNK + k;
                     let frame = &frames[g];
-                    let mut load = ContactLoad::default();
-                    // In increasing pair order (the order of the sums): the pairs [i, g]
-                    // come before the pairs [g, j]. Two plain loops: one iterator chaining
-                    // the two cost 29 instructions a grain-step in the gas.
-                    for &pair in neighbors.second_ends_of(g) {
-                        let pair = pair as usize;
-                        if !pair_active[pair] {
-                            continue;
-                        }
-                        let c = &pair_contacts[pair];
-                        // The contact point lies at the image of this grain that met the first.
-                        let image = match &cell {
-                            Some(cell) => cell.image_shift(neighbors.images[pair]),
-                            None => DVec2::ZERO,
-                        };
-                        load.add(
-                            -c.force_on_first(),
-                            c.point - (frame.center + image),
-                            c.cap_area_second,
-                        );
-                        load.contacts += 1;
-                    }
-                    for pair in neighbors.first_ends_of(g) {
-                        if !pair_active[pair] {
-                            continue;
-                        }
-                        let c = &pair_contacts[pair];
-                        load.add(c.force_on_first(), c.point - frame.center, c.cap_area_first);
-                        load.contacts += 1;
-                    }
+                    let mut load = if frictional_pairs {
+                        pair_load::<true>(g, frame, neighbors, pair_active, pair_contacts, &cell)
+                    } else {
+                        pair_load::<false>(g, frame, neighbors, pair_active, pair_contacts, &cell)
+                    };
                     for (w, wall) in chunk_walls.iter().enumerate() {
                         // A contact that is open this step drops its history. A wall without
                         // friction never has one: its row is left untouched, not rewritten
@@ -1125,6 +1108,59 @@ fn walls_in_reach(frames: &[Frame], walls: &[Wall]) -> [bool; MAX_WALLS] {
         *near = !sum.is_finite() || !wall.clears_box(lo, hi);
     }
     near
+}
+
+/// The contact forces of grain `g`'s pairs on it (`frame`: the grain at the start of the step),
+/// summed in increasing pair order: the pairs `[i, g]` come before the pairs `[g, j]`.
+/// `FRICTIONAL`: whether a pair may carry a tangential force; without one a record's force on
+/// its first grain is `force * normal`, which [`PairContact::force_on_first`] also returns then,
+/// so both forms give the same bits and the frictionless one skips the test.
+#[inline(always)]
+fn pair_load<const FRICTIONAL: bool>(
+    g: usize,
+    frame: &Frame,
+    neighbors: &NeighborList,
+    pair_active: &[bool],
+    pair_contacts: &[PairContact],
+    cell: &Option<PeriodicCell>,
+) -> ContactLoad {
+    let force_on_first = |c: &PairContact| {
+        if FRICTIONAL {
+            c.force_on_first()
+        } else {
+            c.normal_force_on_first()
+        }
+    };
+    let mut load = ContactLoad::default();
+    // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in the
+    // gas.
+    for &pair in neighbors.second_ends_of(g) {
+        let pair = pair as usize;
+        if !pair_active[pair] {
+            continue;
+        }
+        let c = &pair_contacts[pair];
+        // The contact point lies at the image of this grain that met the first.
+        let image = match cell {
+            Some(cell) => cell.image_shift(neighbors.images[pair]),
+            None => DVec2::ZERO,
+        };
+        load.add(
+            -force_on_first(c),
+            c.point - (frame.center + image),
+            c.cap_area_second,
+        );
+        load.contacts += 1;
+    }
+    for pair in neighbors.first_ends_of(g) {
+        if !pair_active[pair] {
+            continue;
+        }
+        let c = &pair_contacts[pair];
+        load.add(force_on_first(c), c.point - frame.center, c.cap_area_first);
+        load.contacts += 1;
+    }
+    load
 }
 
 /// The sums a grain needs from its contacts.
