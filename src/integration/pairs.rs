@@ -77,6 +77,23 @@ impl PairPass<'_> {
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
+        // Only friction between grains gives a pair a tangential force: a world without it
+        // takes a pass that leaves the tangential response out.
+        if self.params.friction.as_ref().is_some_and(|f| f.grains > 0.0) {
+            self.chunk_of::<true>(first_pair, states, actives, records)
+        } else {
+            self.chunk_of::<false>(first_pair, states, actives, records)
+        }
+    }
+
+    /// [`chunk`](Self::chunk); `FRICTIONAL`: whether pairs have friction.
+    fn chunk_of<const FRICTIONAL: bool>(
+        &self,
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
         let mut sums = PairSums::default();
         let count = states.len();
         let mut k = 0;
@@ -87,7 +104,7 @@ impl PairPass<'_> {
                     self.prefetch_ahead(p + lane);
                 }
                 let block = k..k + LANES;
-                self.circle_block(
+                self.circle_block::<FRICTIONAL>(
                     p,
                     &mut states[block.clone()],
                     &mut actives[block.clone()],
@@ -97,7 +114,7 @@ impl PairPass<'_> {
                 k += LANES;
             } else {
                 self.prefetch_ahead(p);
-                self.one_pair(
+                self.one_pair::<FRICTIONAL>(
                     p,
                     &mut states[k],
                     &mut actives[k],
@@ -142,7 +159,7 @@ impl PairPass<'_> {
 
     /// Pair `p` on its own: any pair of grains, any case.
     #[inline(always)]
-    fn one_pair(
+    fn one_pair<const FRICTIONAL: bool>(
         &self,
         p: usize,
         state: &mut PairState,
@@ -212,7 +229,7 @@ impl PairPass<'_> {
                 }
             },
         };
-        self.record(touch, hint, end.branch, state, active, record, sums);
+        self.record::<FRICTIONAL>(touch, hint, end.branch, state, active, record, sums);
     }
 
     /// Writes what the pair's step left: for a contact its record, its state (the tangential
@@ -220,7 +237,7 @@ impl PairPass<'_> {
     /// spring resets).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn record(
+    fn record<const FRICTIONAL: bool>(
         &self,
         touch: Option<Touch>,
         hint: PairHint,
@@ -241,7 +258,7 @@ impl PairPass<'_> {
         let c = &touch.geometry;
         sums.capped += touch.capped as u64;
         let tangential = match &self.params.friction {
-            Some(friction) if friction.grains > 0.0 => friction.law.response(
+            Some(friction) if FRICTIONAL => friction.law.response(
                 state.tangential_history,
                 touch.stiffness,
                 touch.force,
@@ -252,8 +269,11 @@ impl PairPass<'_> {
             ),
             _ => TangentialResponse::default(),
         };
-        sums.dissipation += tangential.dissipated;
-        sums.sliding += tangential.sliding as u64;
+        // Without friction the response is zero: the sums (from +0) would add +0.
+        if FRICTIONAL {
+            sums.dissipation += tangential.dissipated;
+            sums.sliding += tangential.sliding as u64;
+        }
         *record = PairContact {
             normal: c.normal,
             force: touch.force,
@@ -268,7 +288,13 @@ impl PairPass<'_> {
             contact_length: c.length,
         };
         if self.periodic.is_some() {
-            let share = symmetric_dyad(record.force_on_first(), branch);
+            // Without friction the force is its normal part, bit for bit.
+            let force_on_first = if FRICTIONAL {
+                record.force_on_first()
+            } else {
+                record.normal_force_on_first()
+            };
+            let share = symmetric_dyad(force_on_first, branch);
             for (sum, x) in sums.moment.iter_mut().zip(share) {
                 *sum += x;
             }
@@ -278,7 +304,7 @@ impl PairPass<'_> {
     /// `LANES` consecutive pairs of circles from pair `first` on, side by side, then recorded
     /// one by one in pair order (so that the sums keep their order).
     #[inline(always)]
-    fn circle_block(
+    fn circle_block<const FRICTIONAL: bool>(
         &self,
         first: usize,
         states: &mut [PairState],
@@ -302,13 +328,13 @@ impl PairPass<'_> {
             let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
             let touch = match out.lane(lane, &radius) {
                 LaneCase::Irregular => {
-                    self.one_pair(p, state, active, record, sums);
+                    self.one_pair::<FRICTIONAL>(p, state, active, record, sums);
                     continue;
                 }
                 LaneCase::Separate => None,
                 LaneCase::Contact(touch) => Some(touch),
             };
-            self.record(touch, state.hint, end.branch, state, active, record, sums);
+            self.record::<FRICTIONAL>(touch, state.hint, end.branch, state, active, record, sums);
         }
     }
 }
