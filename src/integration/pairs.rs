@@ -626,17 +626,28 @@ mod tests {
         // lane outside its regular case is handed to that path: every record, state, flag and
         // sum (the first failure included) is the same, bit for bit, signed zeros included.
         let contours = Contours::new(1.0);
-        for (seed, friction) in [(1, false), (2, true), (3, false)] {
+        for (seed, friction, periodic) in [
+            (1, false, false),
+            (2, true, false),
+            (3, false, false),
+            (4, false, true),
+            (5, true, true),
+        ] {
             let params = parameters(friction);
             let (frames, pairs) = circle_pairs(seed);
+            // A periodic cell adds the branch vectors' affine rate and the cell stress's sum
+            // (every pair at image (0, 0)).
+            let images = vec![[0, 0]; if periodic { pairs.len() } else { 0 }];
+            let cell = PeriodicCell::rectangle(DVec2::splat(-50.0), 100.0, 100.0).unwrap();
+            let velocity_gradient = DMat2::from_cols_array(&[0.01, 0.002, -0.003, -0.02]);
             let pass = PairPass {
                 params: &params,
                 contours: &contours,
                 frames: &frames,
                 pairs: &pairs,
-                images: &[],
+                images: &images,
                 step: 7,
-                periodic: None,
+                periodic: periodic.then_some((cell, velocity_gradient)),
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)
@@ -657,8 +668,11 @@ mod tests {
                 vec![PairContact::default(); count],
             );
             let mut one_sums = PairSums::default();
+            // The one-pair path as it handles any world (with FRICTIONAL, a world without
+            // friction gets a zero tangential response): `chunk` takes the frictionless pass
+            // where there is no friction, and must give the same bits.
             for p in 0..count {
-                pass.one_pair(
+                pass.one_pair::<true>(
                     p,
                     &mut one.0[p],
                     &mut one.1[p],
