@@ -742,8 +742,7 @@ impl World {
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let neighbors = &self.neighbors;
         let (pair_active, pair_contacts) = (&self.pair_active, &self.pair_contacts);
-        // Only friction between grains gives a pair a tangential force.
-        let frictional_pairs = params.friction.as_ref().is_some_and(|f| f.grains > 0.0);
+        let frictional_pairs = params.frictional_pairs();
         let wall_friction = params
             .friction
             .as_ref()

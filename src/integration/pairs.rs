@@ -77,9 +77,9 @@ impl PairPass<'_> {
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
-        // Only friction between grains gives a pair a tangential force: a world without it
-        // takes a pass that leaves the tangential response out.
-        if self.params.friction.as_ref().is_some_and(|f| f.grains > 0.0) {
+        // A world without friction between grains takes a pass that leaves the tangential
+        // response out.
+        if self.params.frictional_pairs() {
             self.chunk_of::<true>(first_pair, states, actives, records)
         } else {
             self.chunk_of::<false>(first_pair, states, actives, records)

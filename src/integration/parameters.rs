@@ -73,6 +73,13 @@ impl Friction {
 }
 
 impl Parameters {
+    /// Whether contacts between grains have friction: only then does a pair carry a tangential
+    /// force (otherwise its tangential force is an exact +0).
+    #[inline]
+    pub fn frictional_pairs(&self) -> bool {
+        self.friction.as_ref().is_some_and(|f| f.grains > 0.0)
+    }
+
     /// Default numerics for a material: the paper's a = 0.58, b = 2, dbeta = 1 degree,
     /// gamma = 1 for contacts and deformation, k_alpha = 1e-3; `dt` must still be set.
     pub fn new(material: Material, dt: f64) -> Self {
