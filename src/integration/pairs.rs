@@ -258,7 +258,8 @@ impl PairPass<'_> {
         let c = &touch.geometry;
         sums.capped += touch.capped as u64;
         let tangential = match &self.params.friction {
-            Some(friction) if FRICTIONAL => friction.law.response(
+            // FRICTIONAL is the general path: it keeps the test of the friction it is given.
+            Some(friction) if FRICTIONAL && friction.grains > 0.0 => friction.law.response(
                 state.tangential_history,
                 touch.stiffness,
                 touch.force,
