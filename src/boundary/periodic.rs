@@ -347,6 +347,24 @@ mod tests {
     }
 
     #[test]
+    fn the_shift_of_image_zero_keeps_the_products_signed_zeros() {
+        // Expectation: `H (0, 0)` as the product gives it. In a cell turned past a half turn
+        // both x entries of H are negative, so the shift's x is -0.0 (+0.0 would move a centre
+        // at -0.0 to +0.0 where the product leaves it).
+        let cell =
+            PeriodicCell::new(DVec2::ZERO, DVec2::new(-1.0, 0.2), DVec2::new(-0.3, -1.0)).unwrap();
+        let shift = cell.image_shift([0, 0]);
+        assert_eq!(
+            (shift.x.to_bits(), shift.y.to_bits()),
+            ((-0.0_f64).to_bits(), 0.0_f64.to_bits())
+        );
+        let rectangle = PeriodicCell::rectangle(DVec2::ZERO, 2.0, 3.0).unwrap();
+        let shift = rectangle.image_shift([0, 0]);
+        assert_eq!((shift.x.to_bits(), shift.y.to_bits()), (0, 0));
+        assert_eq!(rectangle.image_shift([1, -2]), DVec2::new(2.0, -6.0));
+    }
+
+    #[test]
     fn wrapping_puts_a_point_in_the_cell_by_a_lattice_shift() {
         let cell = sheared();
         for k in 0..500 {

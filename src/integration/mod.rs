@@ -223,6 +223,18 @@ impl PairContact {
     pub fn normal_force_on_first(&self) -> DVec2 {
         self.force * self.normal
     }
+
+    /// [`force_on_first`](Self::force_on_first) in a pass that knows whether pairs have
+    /// friction (`FRICTIONAL`): without it the tangential force is +0 and the normal part is
+    /// the whole force, bit for bit, without the test.
+    #[inline(always)]
+    pub fn force_on_first_in<const FRICTIONAL: bool>(&self) -> DVec2 {
+        if FRICTIONAL {
+            self.force_on_first()
+        } else {
+            self.normal_force_on_first()
+        }
+    }
 }
 
 /// Per-grain quantities of the last step, kept for output.
@@ -1111,9 +1123,8 @@ fn walls_in_reach(frames: &[Frame], walls: &[Wall]) -> [bool; MAX_WALLS] {
 
 /// The contact forces of grain `g`'s pairs on it (`frame`: the grain at the start of the step),
 /// summed in increasing pair order: the pairs `[i, g]` come before the pairs `[g, j]`.
-/// `FRICTIONAL`: whether a pair may carry a tangential force; without one a record's force on
-/// its first grain is `force * normal`, which [`PairContact::force_on_first`] also returns then,
-/// so both forms give the same bits and the frictionless one skips the test.
+/// `FRICTIONAL`: whether a pair may carry a tangential force (see
+/// [`PairContact::force_on_first_in`]).
 #[inline(always)]
 fn pair_load<const FRICTIONAL: bool>(
     g: usize,
@@ -1123,13 +1134,6 @@ fn pair_load<const FRICTIONAL: bool>(
     pair_contacts: &[PairContact],
     cell: &Option<PeriodicCell>,
 ) -> ContactLoad {
-    let force_on_first = |c: &PairContact| {
-        if FRICTIONAL {
-            c.force_on_first()
-        } else {
-            c.normal_force_on_first()
-        }
-    };
     let mut load = ContactLoad::default();
     // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in the
     // gas.
@@ -1145,7 +1149,7 @@ fn pair_load<const FRICTIONAL: bool>(
             None => DVec2::ZERO,
         };
         load.add(
-            -force_on_first(c),
+            -c.force_on_first_in::<FRICTIONAL>(),
             c.point - (frame.center + image),
             c.cap_area_second,
         );
@@ -1156,7 +1160,11 @@ fn pair_load<const FRICTIONAL: bool>(
             continue;
         }
         let c = &pair_contacts[pair];
-        load.add(force_on_first(c), c.point - frame.center, c.cap_area_first);
+        load.add(
+            c.force_on_first_in::<FRICTIONAL>(),
+            c.point - frame.center,
+            c.cap_area_first,
+        );
         load.contacts += 1;
     }
     load

@@ -289,13 +289,7 @@ impl PairPass<'_> {
             contact_length: c.length,
         };
         if self.periodic.is_some() {
-            // Without friction the force is its normal part, bit for bit.
-            let force_on_first = if FRICTIONAL {
-                record.force_on_first()
-            } else {
-                record.normal_force_on_first()
-            };
-            let share = symmetric_dyad(force_on_first, branch);
+            let share = symmetric_dyad(record.force_on_first_in::<FRICTIONAL>(), branch);
             for (sum, x) in sums.moment.iter_mut().zip(share) {
                 *sum += x;
             }
