@@ -3,7 +3,7 @@
 //! grains in grain order.
 
 use super::GrainStress;
-use super::{BoxCarry, ChunkSums, Frame, Instability, MAX_WALLS, PairContact, Parameters};
+use super::{BoxCarry, ChunkSums, Frame, Instability, MAX_WALLS, Parameters};
 use crate::boundary::periodic::symmetric_dyad;
 use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
@@ -227,15 +227,18 @@ impl ContactLoad {
         self.lost_area += cap_area;
     }
 
-    /// Adds the pair contact `c` at its first grain, whose centre is `center`. `FRICTIONAL`:
-    /// whether pairs have friction (see [`PairContact::force_on_first_in`]).
+    /// Adds a pair contact at its first grain: `force_on_first` the contact's force on that
+    /// grain ([`force_on_first_in`](super::PairContact::force_on_first_in)), `point` the contact point and `center` the
+    /// grain's centre.
     #[inline(always)]
-    pub(super) fn add_first_end<const FRICTIONAL: bool>(&mut self, c: &PairContact, center: DVec2) {
-        self.add(
-            c.force_on_first_in::<FRICTIONAL>(),
-            c.point - center,
-            c.cap_area_first,
-        );
+    pub(super) fn add_first_end(
+        &mut self,
+        force_on_first: DVec2,
+        point: DVec2,
+        cap_area_first: f64,
+        center: DVec2,
+    ) {
+        self.add(force_on_first, point - center, cap_area_first);
         self.contacts += 1;
     }
 

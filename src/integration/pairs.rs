@@ -118,6 +118,29 @@ impl PairSums {
     }
 }
 
+/// Where [`PairPass::compute`] hands each pair's outcome, in list order.
+pub(super) trait PairSink {
+    /// Pair `p`, the `k`-th of the list: its record and its share of the sums where it is in
+    /// contact, `None` where it is open or failed.
+    fn pair(&mut self, k: usize, p: usize, contact: Option<(&PairContact, PairShare)>);
+}
+
+/// Sums the shares in the order they come (the general path's; see [`PairPass::chunk`]).
+#[cfg(test)]
+struct SumShares {
+    sums: PairSums,
+    periodic: bool,
+}
+
+#[cfg(test)]
+impl PairSink for SumShares {
+    fn pair(&mut self, _: usize, _: usize, contact: Option<(&PairContact, PairShare)>) {
+        if let Some((_, share)) = contact {
+            self.sums.add::<true>(&share, self.periodic);
+        }
+    }
+}
+
 /// The first failure of a run of pairs, with its pair: runs that are computed apart are merged
 /// by pair index, so that the step reports the failure of the lowest pair whatever the order
 /// of computation.
@@ -131,8 +154,7 @@ impl PairPass<'_> {
 
     /// Computes the pairs `list` (increasing pair indices, all within `slots`): their contacts,
     /// records and states. [`LANES`] consecutive entries of the list that are all pairs of
-    /// circles are computed side by side. Each pair's share of the sums (none for an open or
-    /// failed pair) goes to `sink(k, p, share)`, `k` its place in the list, in list order; the
+    /// circles are computed side by side. Each pair goes to `sink`, in list order; the
     /// first failure in list order to `failure`. `FRICTIONAL` must be [`frictional`]
     /// (Self::frictional).
     #[inline(always)]
@@ -141,7 +163,7 @@ impl PairPass<'_> {
         list: &[u32],
         slots: &mut PairSlots,
         failure: &mut PairFailure,
-        mut sink: impl FnMut(usize, usize, Option<PairShare>),
+        sink: &mut impl PairSink,
     ) {
         let count = list.len();
         let mut k = 0;
@@ -150,14 +172,14 @@ impl PairPass<'_> {
                 for ahead in k..k + LANES {
                     self.prefetch_ahead(list, ahead);
                 }
-                self.circle_block::<FRICTIONAL>(k, &list[k..k + LANES], slots, failure, &mut sink);
+                self.circle_block::<FRICTIONAL>(k, &list[k..k + LANES], slots, failure, sink);
                 k += LANES;
             } else {
                 self.prefetch_ahead(list, k);
                 let p = list[k] as usize;
                 let (state, active, record) = slots.at(p);
                 let share = self.one_pair::<FRICTIONAL>(p, state, active, record, failure);
-                sink(k, p, share);
+                sink.pair(k, p, share.map(|share| (&*record, share)));
                 k += 1;
             }
         }
@@ -170,24 +192,18 @@ impl PairPass<'_> {
         let list: Vec<u32> = (slots.first..slots.first + slots.states.len())
             .map(|p| p as u32)
             .collect();
-        let mut sums = PairSums::default();
+        let mut sums = SumShares {
+            sums: PairSums::default(),
+            periodic: self.periodic.is_some(),
+        };
         let mut failure = None;
-        let periodic = self.periodic.is_some();
         if self.frictional() {
-            self.compute::<true>(&list, slots, &mut failure, |_, _, share| {
-                if let Some(share) = share {
-                    sums.add::<true>(&share, periodic);
-                }
-            });
+            self.compute::<true>(&list, slots, &mut failure, &mut sums);
         } else {
-            self.compute::<false>(&list, slots, &mut failure, |_, _, share| {
-                if let Some(share) = share {
-                    sums.add::<false>(&share, periodic);
-                }
-            });
+            self.compute::<false>(&list, slots, &mut failure, &mut sums);
         }
-        sums.failure = failure;
-        sums
+        sums.sums.failure = failure;
+        sums.sums
     }
 
     #[inline(always)]
@@ -372,7 +388,7 @@ impl PairPass<'_> {
         block: &[u32],
         slots: &mut PairSlots,
         failure: &mut PairFailure,
-        sink: &mut impl FnMut(usize, usize, Option<PairShare>),
+        sink: &mut impl PairSink,
     ) {
         let mut input = DiscPairs::<PairLanes>::default();
         let ends: [SecondEnd; LANES] = std::array::from_fn(|lane| {
@@ -404,7 +420,7 @@ impl PairPass<'_> {
                     record,
                 ),
             };
-            sink(k0 + lane, p, share);
+            sink.pair(k0 + lane, p, share.map(|share| (&*record, share)));
         }
     }
 }

@@ -19,8 +19,11 @@
 
 use super::GrainStress;
 use super::grain_pass::{ContactLoad, GrainPass};
-use super::pairs::{PairFailure, PairPass, PairShare, PairSlots};
-use super::{ChunkSums, GRAIN_CHUNK, MAX_WALLS, PairContact, PairState, PairSums, pair_chunks};
+use super::pairs::{PairFailure, PairPass, PairShare, PairSink, PairSlots};
+use super::{
+    ChunkSums, Frame, GRAIN_CHUNK, MAX_WALLS, PairContact, PairState, PairSums, pair_chunks,
+};
+use crate::boundary::periodic::PeriodicCell;
 use crate::grain::{Grain, GrainLevel};
 use glam::DVec2;
 use rayon::prelude::*;
@@ -55,8 +58,9 @@ pub(super) struct CrossingContact {
     active: bool,
     force_on_first: DVec2,
     point: DVec2,
+    cap_area_first: f64,
     cap_area_second: f64,
-    share: Option<PairShare>,
+    share: PairShare,
 }
 
 /// What one grain chunk of the pass leaves: its pair sums and its grain sums.
@@ -217,18 +221,9 @@ impl UnitPass<'_> {
         contacts: &mut [CrossingContact],
     ) -> PairFailure {
         let mut failure = None;
+        let mut sink = KeepCrossing::<FRICTIONAL> { contacts };
         self.pairs
-            .compute::<FRICTIONAL>(list, slots, &mut failure, |k, _, share| {
-                contacts[k].share = share;
-            });
-        for (contact, &p) in contacts.iter_mut().zip(list) {
-            let s = p as usize - slots.first;
-            let record = &slots.records[s];
-            contact.active = slots.actives[s];
-            contact.force_on_first = record.force_on_first_in::<FRICTIONAL>();
-            contact.point = record.point;
-            contact.cap_area_second = record.cap_area_second;
-        }
+            .compute::<FRICTIONAL>(list, slots, &mut failure, &mut sink);
         failure
     }
 
@@ -305,10 +300,6 @@ impl UnitPass<'_> {
         let first_grain = unit * layout.unit_grains();
         let end_grain = (first_grain + grains.grains.len()) as u32;
         let periodic = self.pairs.periodic.as_ref().map(|(cell, _)| cell);
-        let image = |p: usize| match periodic {
-            Some(cell) => cell.image_shift(self.pairs.images[p]),
-            None => DVec2::ZERO,
-        };
         // Each grain's load starts with its crossing pairs from earlier units, in pair order.
         scratch.loads.clear();
         scratch
@@ -324,7 +315,7 @@ impl UnitPass<'_> {
                             c.point,
                             c.cap_area_second,
                             frames[g].center,
-                            image(p),
+                            image_shift(periodic, self.pairs.images, p),
                         );
                     }
                 }
@@ -345,60 +336,37 @@ impl UnitPass<'_> {
                 self.chunk_ends[chunk - 1]
             };
             let pair_end = self.chunk_ends[chunk];
-            // The chunk's pairs inside the unit, computed here; their shares and the crossing
-            // pairs' kept ones summed in pair order.
+            // The chunk's pairs inside the unit, computed here. Each contact goes to both its
+            // grains' loads as soon as it is recorded, and its share to the chunk's sums; the
+            // crossing pairs' kept contacts are merged in where they stand in pair order (to
+            // their first grain only: the second is in a later unit).
             scratch.inner.clear();
             scratch.inner.extend(
                 (pair_start..pair_end)
                     .filter(|&p| pairs[p][1] < end_grain)
                     .map(|p| p as u32),
             );
-            let mut sums = PairSums::default();
-            let mut failure = None;
-            let has_periodic = periodic.is_some();
-            let mut add_crossing_before = |p: usize, sums: &mut PairSums| {
-                while let Some(&q) = layout.crossing.get(crossing_place)
-                    && (q as usize) < p
-                {
-                    if let Some(share) = &crossing[crossing_place].share {
-                        sums.add::<FRICTIONAL>(share, has_periodic);
-                    }
-                    crossing_place += 1;
-                }
+            let mut sink = InnerSink::<FRICTIONAL> {
+                sums: PairSums::default(),
+                loads: &mut scratch.loads,
+                first_grain,
+                crossing_pairs: &layout.crossing,
+                crossing,
+                crossing_place,
+                pairs,
+                frames,
+                periodic: self.pairs.periodic.as_ref().map(|(cell, _)| cell),
+                images: self.pairs.images,
             };
+            let mut failure = None;
             self.pairs
-                .compute::<FRICTIONAL>(&scratch.inner, slots, &mut failure, |_, p, share| {
-                    add_crossing_before(p, &mut sums);
-                    if let Some(share) = share {
-                        sums.add::<FRICTIONAL>(&share, has_periodic);
-                    }
-                });
-            add_crossing_before(pair_end, &mut sums);
-            sums.failure = failure;
-            result.pairs = sums;
-            // Each contact to both its grains' loads, in pair order (the second grain's only
-            // where it is in this unit: a crossing pair reaches a later unit through
-            // `crossing`).
-            let loads = &mut scratch.loads;
-            for p in pair_start..pair_end {
-                let s = p - slots.first;
-                if !slots.actives[s] {
-                    continue;
-                }
-                let record = &slots.records[s];
-                let [i, j] = pairs[p];
-                let (i, j) = (i as usize, j as usize);
-                loads[i - first_grain].add_first_end::<FRICTIONAL>(record, frames[i].center);
-                if j < end_grain as usize {
-                    loads[j - first_grain].add_second_end(
-                        record.force_on_first_in::<FRICTIONAL>(),
-                        record.point,
-                        record.cap_area_second,
-                        frames[j].center,
-                        image(p),
-                    );
-                }
-            }
+                .compute::<FRICTIONAL>(&scratch.inner, slots, &mut failure, &mut sink);
+            sink.crossing_before(pair_end);
+            crossing_place = sink.crossing_place;
+            result.pairs = PairSums {
+                failure,
+                ..sink.sums
+            };
             // The chunk's grains are complete: a later pair has a later first grain.
             let range = c * GRAIN_CHUNK..((c + 1) * GRAIN_CHUNK).min(grains.len());
             result.grains = self.grains.chunk(
@@ -407,7 +375,7 @@ impl UnitPass<'_> {
                 &mut stresses[range.clone()],
                 &mut levels[range.clone()],
                 &mut wall_histories[range.clone()],
-                &loads[range],
+                &scratch.loads[range],
             );
         }
     }
@@ -418,4 +386,105 @@ struct GrainArrays<'a> {
     stresses: &'a mut [GrainStress],
     levels: &'a mut [GrainLevel],
     wall_histories: &'a mut [[f64; MAX_WALLS]],
+}
+
+/// The shift of the image of pair `p`'s second grain that meets the first: zero outside a
+/// periodic cell.
+#[inline(always)]
+fn image_shift(cell: Option<&PeriodicCell>, images: &[[i64; 2]], p: usize) -> DVec2 {
+    match cell {
+        Some(cell) => cell.image_shift(images[p]),
+        None => DVec2::ZERO,
+    }
+}
+
+/// Keeps what the later units read of each crossing pair.
+struct KeepCrossing<'a, const FRICTIONAL: bool> {
+    contacts: &'a mut [CrossingContact],
+}
+
+impl<const FRICTIONAL: bool> PairSink for KeepCrossing<'_, FRICTIONAL> {
+    #[inline(always)]
+    fn pair(&mut self, k: usize, _: usize, contact: Option<(&PairContact, PairShare)>) {
+        self.contacts[k] = match contact {
+            None => CrossingContact::default(),
+            Some((record, share)) => CrossingContact {
+                active: true,
+                force_on_first: record.force_on_first_in::<FRICTIONAL>(),
+                point: record.point,
+                cap_area_first: record.cap_area_first,
+                cap_area_second: record.cap_area_second,
+                share,
+            },
+        };
+    }
+}
+
+/// A grain chunk's pairs inside its unit as they are computed: each contact to both its
+/// grains' loads, its share to the chunk's sums, and before it the crossing pairs that precede
+/// it in pair order (to their first grain only: the second lies in a later unit).
+struct InnerSink<'a, const FRICTIONAL: bool> {
+    sums: PairSums,
+    /// The unit's grains' loads, from grain `first_grain` on.
+    loads: &'a mut [ContactLoad],
+    first_grain: usize,
+    crossing_pairs: &'a [u32],
+    crossing: &'a [CrossingContact],
+    /// The next crossing pair to merge in (a place in `crossing_pairs`).
+    crossing_place: usize,
+    pairs: &'a [[u32; 2]],
+    frames: &'a [Frame],
+    periodic: Option<&'a PeriodicCell>,
+    images: &'a [[i64; 2]],
+}
+
+impl<const FRICTIONAL: bool> InnerSink<'_, FRICTIONAL> {
+    /// Merges in the crossing pairs before pair `p`.
+    #[inline(always)]
+    fn crossing_before(&mut self, p: usize) {
+        while let Some(&q) = self.crossing_pairs.get(self.crossing_place)
+            && (q as usize) < p
+        {
+            let c = &self.crossing[self.crossing_place];
+            if c.active {
+                self.sums
+                    .add::<FRICTIONAL>(&c.share, self.periodic.is_some());
+                let i = self.pairs[q as usize][0] as usize;
+                self.loads[i - self.first_grain].add_first_end(
+                    c.force_on_first,
+                    c.point,
+                    c.cap_area_first,
+                    self.frames[i].center,
+                );
+            }
+            self.crossing_place += 1;
+        }
+    }
+}
+
+impl<const FRICTIONAL: bool> PairSink for InnerSink<'_, FRICTIONAL> {
+    #[inline(always)]
+    fn pair(&mut self, _: usize, p: usize, contact: Option<(&PairContact, PairShare)>) {
+        self.crossing_before(p);
+        let Some((record, share)) = contact else {
+            return;
+        };
+        self.sums.add::<FRICTIONAL>(&share, self.periodic.is_some());
+        let [i, j] = self.pairs[p];
+        let (i, j) = (i as usize, j as usize);
+        let force_on_first = record.force_on_first_in::<FRICTIONAL>();
+        self.loads[i - self.first_grain].add_first_end(
+            force_on_first,
+            record.point,
+            record.cap_area_first,
+            self.frames[i].center,
+        );
+        self.loads[j - self.first_grain].add_second_end(
+            force_on_first,
+            record.point,
+            record.cap_area_second,
+            self.frames[j].center,
+            image_shift(self.periodic, self.images, p),
+        );
+    }
 }
