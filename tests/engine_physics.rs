@@ -471,35 +471,3 @@ fn contacts_are_exactly_the_overlapping_candidates_and_end_when_the_grains_part(
     assert_eq!(world.totals.contacts, 0);
     assert!(world.contact_history().pairs.is_empty());
 }
-
-#[test]
-fn results_do_not_depend_on_how_the_step_cuts_grains_into_units() {
-    // Expectation: a unit's pairs that reach into a later unit are computed in a pass of their
-    // own, its other pairs with its grains; a pair's computation is the same wherever it
-    // happens and every sum keeps pair order, so one unit per grain chunk (many crossing
-    // pairs), a few chunks per unit, and one unit for all (none) give the same bits. With
-    // friction (springs and dissipation summed in order) and in a periodic cell (its stress).
-    for periodic in [false, true] {
-        let run = |unit_chunks: usize| {
-            let mut world = sdem::run::bench::dense_packing(2500, 1.0);
-            sdem::run::bench::with_friction(&mut world, 0.5);
-            if periodic {
-                // The box becomes the cell: contacts across its sides.
-                world = world.with_periodic(sdem::boundary::periodic::PeriodicBoundary::default());
-            }
-            world.unit_chunks = Some(unit_chunks);
-            for _ in 0..60 {
-                world.step().unwrap();
-            }
-            world
-        };
-        let (one, few, all) = (run(1), run(3), run(100));
-        assert!(one.totals.contacts > 2000 && one.totals.sliding_contacts > 0);
-        for other in [&few, &all] {
-            assert_eq!(one.totals, other.totals, "periodic: {periodic}");
-            assert_eq!(one.grains, other.grains, "periodic: {periodic}");
-            assert_eq!(one.grain_stress, other.grain_stress, "periodic: {periodic}");
-            assert_eq!(one.contact_history(), other.contact_history());
-        }
-    }
-}

@@ -68,158 +68,78 @@ struct Touch {
     effective_mass: f64,
 }
 
-/// The slots of a run of pairs (from pair `first` on): their states, flags and records.
-pub(super) struct PairSlots<'a> {
-    pub first: usize,
-    pub states: &'a mut [PairState],
-    pub actives: &'a mut [bool],
-    pub records: &'a mut [PairContact],
-}
-
-impl PairSlots<'_> {
-    /// The slots of pair `p`.
-    #[inline(always)]
-    fn at(&mut self, p: usize) -> (&mut PairState, &mut bool, &mut PairContact) {
-        let s = p - self.first;
-        (
-            &mut self.states[s],
-            &mut self.actives[s],
-            &mut self.records[s],
-        )
-    }
-}
-
-/// A contact's shares of the pair sums ([`PairSums`]), which are added in pair order.
-#[derive(Debug, Clone, Copy, Default)]
-pub(super) struct PairShare {
-    pub capped: bool,
-    pub sliding: bool,
-    pub dissipation: f64,
-    /// Periodic cell only: `sym(f_i ⊗ d_ij)` (xx, yy, xy).
-    pub moment: [f64; 3],
-}
-
-impl PairSums {
-    /// Adds a contact's share. `FRICTIONAL`: whether pairs have friction (without, the
-    /// dissipation and sliding shares are zero, and the sums from +0 are left as they are);
-    /// `periodic`: whether there is a cell stress to sum.
-    #[inline(always)]
-    pub(super) fn add<const FRICTIONAL: bool>(&mut self, share: &PairShare, periodic: bool) {
-        self.capped += share.capped as u64;
-        if FRICTIONAL {
-            self.dissipation += share.dissipation;
-            self.sliding += share.sliding as u64;
-        }
-        if periodic {
-            for (sum, x) in self.moment.iter_mut().zip(share.moment) {
-                *sum += x;
-            }
-        }
-    }
-}
-
-/// Where [`PairPass::compute`] hands each pair's outcome, in list order.
-pub(super) trait PairSink {
-    /// Pair `p`, the `k`-th of the list: its record and its share of the sums where it is in
-    /// contact, `None` where it is open or failed.
-    fn pair(&mut self, k: usize, p: usize, contact: Option<(&PairContact, PairShare)>);
-}
-
-/// Sums the shares in the order they come (the general path's; see [`PairPass::chunk`]).
-#[cfg(test)]
-struct SumShares {
-    sums: PairSums,
-    periodic: bool,
-}
-
-#[cfg(test)]
-impl PairSink for SumShares {
-    fn pair(&mut self, _: usize, _: usize, contact: Option<(&PairContact, PairShare)>) {
-        if let Some((_, share)) = contact {
-            self.sums.add::<true>(&share, self.periodic);
-        }
-    }
-}
-
-/// The first failure of a run of pairs, with its pair: runs that are computed apart are merged
-/// by pair index, so that the step reports the failure of the lowest pair whatever the order
-/// of computation.
-pub(super) type PairFailure = Option<(usize, Instability)>;
-
 impl PairPass<'_> {
-    /// Whether pairs have friction: the pass without it leaves the tangential response out.
-    pub fn frictional(&self) -> bool {
-        self.params.frictional_pairs()
+    /// The pairs of one chunk, the first of which is pair `first_pair`; returns their sums.
+    pub fn chunk(
+        &self,
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
+        // A world without friction between grains takes a pass that leaves the tangential
+        // response out.
+        if self.params.frictional_pairs() {
+            self.chunk_of::<true>(first_pair, states, actives, records)
+        } else {
+            self.chunk_of::<false>(first_pair, states, actives, records)
+        }
     }
 
-    /// Computes the pairs `list` (increasing pair indices, all within `slots`): their contacts,
-    /// records and states. [`LANES`] consecutive entries of the list that are all pairs of
-    /// circles are computed side by side. Each pair goes to `sink`, in list order; the
-    /// first failure in list order to `failure`. `FRICTIONAL` must be [`frictional`]
-    /// (Self::frictional).
-    #[inline(always)]
-    pub fn compute<const FRICTIONAL: bool>(
+    /// [`chunk`](Self::chunk); `FRICTIONAL`: whether pairs have friction.
+    fn chunk_of<const FRICTIONAL: bool>(
         &self,
-        list: &[u32],
-        slots: &mut PairSlots,
-        failure: &mut PairFailure,
-        sink: &mut impl PairSink,
-    ) {
-        let count = list.len();
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
+        let mut sums = PairSums::default();
+        let count = states.len();
         let mut k = 0;
         while k < count {
-            if k + LANES <= count && self.all_circles(&list[k..k + LANES]) {
-                for ahead in k..k + LANES {
-                    self.prefetch_ahead(list, ahead);
+            let p = first_pair + k;
+            if k + LANES <= count && self.all_circles(p) {
+                for lane in 0..LANES {
+                    self.prefetch_ahead(p + lane);
                 }
-                self.circle_block::<FRICTIONAL>(k, &list[k..k + LANES], slots, failure, sink);
+                let block = k..k + LANES;
+                self.circle_block::<FRICTIONAL>(
+                    p,
+                    &mut states[block.clone()],
+                    &mut actives[block.clone()],
+                    &mut records[block],
+                    &mut sums,
+                );
                 k += LANES;
             } else {
-                self.prefetch_ahead(list, k);
-                let p = list[k] as usize;
-                let (state, active, record) = slots.at(p);
-                let share = self.one_pair::<FRICTIONAL>(p, state, active, record, failure);
-                sink.pair(k, p, share.map(|share| (&*record, share)));
+                self.prefetch_ahead(p);
+                self.one_pair::<FRICTIONAL>(
+                    p,
+                    &mut states[k],
+                    &mut actives[k],
+                    &mut records[k],
+                    &mut sums,
+                );
                 k += 1;
             }
         }
-    }
-
-    /// Every pair of a run of consecutive pairs, as [`compute`](Self::compute) with the
-    /// general path, its shares summed in pair order.
-    #[cfg(test)]
-    pub fn chunk(&self, slots: &mut PairSlots) -> PairSums {
-        let list: Vec<u32> = (slots.first..slots.first + slots.states.len())
-            .map(|p| p as u32)
-            .collect();
-        let mut sums = SumShares {
-            sums: PairSums::default(),
-            periodic: self.periodic.is_some(),
-        };
-        let mut failure = None;
-        if self.frictional() {
-            self.compute::<true>(&list, slots, &mut failure, &mut sums);
-        } else {
-            self.compute::<false>(&list, slots, &mut failure, &mut sums);
-        }
-        sums.sums.failure = failure;
-        sums.sums
+        sums
     }
 
     #[inline(always)]
-    fn prefetch_ahead(&self, list: &[u32], k: usize) {
-        if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
-            prefetch(&self.frames[self.pairs[ahead as usize][1] as usize]);
+    fn prefetch_ahead(&self, p: usize) {
+        if let Some(&[_, ahead]) = self.pairs.get(p + PREFETCH_AHEAD) {
+            prefetch(&self.frames[ahead as usize]);
         }
     }
 
-    /// Whether the pairs `block` are all pairs of two circles.
+    /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
     #[inline(always)]
-    fn all_circles(&self, block: &[u32]) -> bool {
-        block.iter().all(|&p| {
-            let [i, j] = self.pairs[p as usize];
-            self.frames[i as usize].circle && self.frames[j as usize].circle
-        })
+    fn all_circles(&self, p: usize) -> bool {
+        self.pairs[p..p + LANES]
+            .iter()
+            .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
     }
 
     #[inline(always)]
@@ -237,7 +157,7 @@ impl PairPass<'_> {
         end
     }
 
-    /// Pair `p` on its own: any pair of grains, any case. Returns its share of the sums.
+    /// Pair `p` on its own: any pair of grains, any case.
     #[inline(always)]
     fn one_pair<const FRICTIONAL: bool>(
         &self,
@@ -245,8 +165,8 @@ impl PairPass<'_> {
         state: &mut PairState,
         active: &mut bool,
         record: &mut PairContact,
-        failure: &mut PairFailure,
-    ) -> Option<PairShare> {
+        sums: &mut PairSums,
+    ) {
         let [i, j] = self.pairs[p];
         let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
         let end = self.second_end(p, fi, fj);
@@ -268,28 +188,22 @@ impl PairPass<'_> {
         let touch = match overlap {
             Overlap::Separate => None,
             Overlap::Swallowed => {
-                failure.get_or_insert((
-                    p,
-                    Instability::Swallowed {
-                        step: self.step,
-                        grain: i as usize,
-                        other: Some(j as usize),
-                    },
-                ));
+                sums.failure.get_or_insert(Instability::Swallowed {
+                    step: self.step,
+                    grain: i as usize,
+                    other: Some(j as usize),
+                });
                 None
             }
             Overlap::Contact(c) => match self.params.law.response(c.length, c.normal_gap) {
                 Err(exit) => {
-                    failure.get_or_insert((
-                        p,
-                        Instability::ContactDomain {
-                            step: self.step,
-                            grain: i as usize,
-                            other: Some(j as usize),
-                            length: exit.length,
-                            normal_gap: exit.normal_gap,
-                        },
-                    ));
+                    sums.failure.get_or_insert(Instability::ContactDomain {
+                        step: self.step,
+                        grain: i as usize,
+                        other: Some(j as usize),
+                        length: exit.length,
+                        normal_gap: exit.normal_gap,
+                    });
                     None
                 }
                 Ok(response) => {
@@ -315,13 +229,14 @@ impl PairPass<'_> {
                 }
             },
         };
-        self.record::<FRICTIONAL>(touch, hint, end.branch, state, active, record)
+        self.record::<FRICTIONAL>(touch, hint, end.branch, state, active, record, sums);
     }
 
-    /// Writes what the pair's step left: for a contact its record and its state (the
-    /// tangential spring), and returns its share of the sums; for an open or failed pair only
-    /// its search hint (its spring resets), and no share.
+    /// Writes what the pair's step left: for a contact its record, its state (the tangential
+    /// spring) and its share of the sums; for an open or failed pair only its search hint (its
+    /// spring resets).
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn record<const FRICTIONAL: bool>(
         &self,
         touch: Option<Touch>,
@@ -330,16 +245,18 @@ impl PairPass<'_> {
         state: &mut PairState,
         active: &mut bool,
         record: &mut PairContact,
-    ) -> Option<PairShare> {
+        sums: &mut PairSums,
+    ) {
         *active = touch.is_some();
         let Some(touch) = touch else {
             *state = PairState {
                 hint,
                 ..Default::default()
             };
-            return None;
+            return;
         };
         let c = &touch.geometry;
+        sums.capped += touch.capped as u64;
         let tangential = match &self.params.friction {
             // FRICTIONAL is the general path: it keeps the test of the friction it is given.
             Some(friction) if FRICTIONAL && friction.grains > 0.0 => friction.law.response(
@@ -353,6 +270,11 @@ impl PairPass<'_> {
             ),
             _ => TangentialResponse::default(),
         };
+        // Without friction the response is zero: the sums (from +0) would add +0.
+        if FRICTIONAL {
+            sums.dissipation += tangential.dissipated;
+            sums.sliding += tangential.sliding as u64;
+        }
         *record = PairContact {
             normal: c.normal,
             force: touch.force,
@@ -366,61 +288,48 @@ impl PairPass<'_> {
             tangential_history: tangential.history,
             contact_length: c.length,
         };
-        let moment = if self.periodic.is_some() {
-            symmetric_dyad(record.force_on_first_in::<FRICTIONAL>(), branch)
-        } else {
-            [0.0; 3]
-        };
-        Some(PairShare {
-            capped: touch.capped,
-            sliding: tangential.sliding,
-            dissipation: tangential.dissipated,
-            moment,
-        })
+        if self.periodic.is_some() {
+            let share = symmetric_dyad(record.force_on_first_in::<FRICTIONAL>(), branch);
+            for (sum, x) in sums.moment.iter_mut().zip(share) {
+                *sum += x;
+            }
+        }
     }
 
-    /// The [`LANES`] pairs `block` (all pairs of circles; list entries `k0..` of a
-    /// [`compute`](Self::compute)) side by side, then recorded one by one in their order.
+    /// `LANES` consecutive pairs of circles from pair `first` on, side by side, then recorded
+    /// one by one in pair order (so that the sums keep their order).
     #[inline(always)]
     fn circle_block<const FRICTIONAL: bool>(
         &self,
-        k0: usize,
-        block: &[u32],
-        slots: &mut PairSlots,
-        failure: &mut PairFailure,
-        sink: &mut impl PairSink,
+        first: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+        sums: &mut PairSums,
     ) {
         let mut input = DiscPairs::<PairLanes>::default();
         let ends: [SecondEnd; LANES] = std::array::from_fn(|lane| {
-            let p = block[lane] as usize;
-            let [i, j] = self.pairs[p];
+            let [i, j] = self.pairs[first + lane];
             let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
-            let end = self.second_end(p, fi, fj);
+            let end = self.second_end(first + lane, fi, fj);
             input.set_lane(lane, fi, fj, &end);
             end
         });
         let out = disc_pair_forces_dispatch(&input, &self.params.law, self.params.contact_damping);
         for (lane, end) in ends.iter().enumerate() {
-            let p = block[lane] as usize;
-            let (state, active, record) = slots.at(p);
+            let p = first + lane;
+            let (state, active, record) =
+                (&mut states[lane], &mut actives[lane], &mut records[lane]);
             let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
-            let share = match out.lane(lane, &radius) {
+            let touch = match out.lane(lane, &radius) {
                 LaneCase::Irregular => {
-                    self.one_pair::<FRICTIONAL>(p, state, active, record, failure)
+                    self.one_pair::<FRICTIONAL>(p, state, active, record, sums);
+                    continue;
                 }
-                LaneCase::Separate => {
-                    self.record::<FRICTIONAL>(None, state.hint, end.branch, state, active, record)
-                }
-                LaneCase::Contact(touch) => self.record::<FRICTIONAL>(
-                    Some(touch),
-                    state.hint,
-                    end.branch,
-                    state,
-                    active,
-                    record,
-                ),
+                LaneCase::Separate => None,
+                LaneCase::Contact(touch) => Some(touch),
             };
-            sink.pair(k0 + lane, p, share.map(|share| (&*record, share)));
+            self.record::<FRICTIONAL>(touch, state.hint, end.branch, state, active, record, sums);
         }
     }
 }
@@ -747,35 +656,25 @@ mod tests {
                 vec![false; count],
                 vec![PairContact::default(); count],
             );
-            let lane_sums = pass.chunk(&mut PairSlots {
-                first: 0,
-                states: &mut lanes.0,
-                actives: &mut lanes.1,
-                records: &mut lanes.2,
-            });
+            let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
             let mut one = (
                 start,
                 vec![false; count],
                 vec![PairContact::default(); count],
             );
             let mut one_sums = PairSums::default();
-            let mut failure = None;
             // The one-pair path as it handles any world (with FRICTIONAL, a world without
             // friction gets a zero tangential response): `chunk` takes the frictionless pass
             // where there is no friction, and must give the same bits.
             for p in 0..count {
-                let share = pass.one_pair::<true>(
+                pass.one_pair::<true>(
                     p,
                     &mut one.0[p],
                     &mut one.1[p],
                     &mut one.2[p],
-                    &mut failure,
+                    &mut one_sums,
                 );
-                if let Some(share) = share {
-                    one_sums.add::<true>(&share, periodic);
-                }
             }
-            one_sums.failure = failure;
             assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
             assert_eq!(
                 format!("{lane_sums:?}"),

@@ -130,8 +130,8 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         phases: PhaseTimes {
             frames: world.phase_times.frames - phases_before.frames,
             neighbors: world.phase_times.neighbors - phases_before.neighbors,
-            crossing_pairs: world.phase_times.crossing_pairs - phases_before.crossing_pairs,
-            units: world.phase_times.units - phases_before.units,
+            pairs: world.phase_times.pairs - phases_before.pairs,
+            grains: world.phase_times.grains - phases_before.grains,
         },
     })
 }

@@ -580,8 +580,8 @@ pub(crate) fn write_summary(
         for (name, seconds) in [
             ("frames", p.frames),
             ("neighbor_list", p.neighbors),
-            ("crossing_pairs", p.crossing_pairs),
-            ("pairs_and_grains", p.units),
+            ("pairs", p.pairs),
+            ("grains", p.grains),
         ] {
             writeln!(f, "pass_seconds_{name} = {seconds:.3}")?;
         }
