@@ -1,11 +1,13 @@
 //! The explicit SDEM time step (SPEC §4): contact forces, Love–Weber stress, grain stress,
 //! symplectic Euler on the six degrees of freedom, incompressibility correction.
 //!
-//! One step is three parallel passes, each deterministic whatever the thread count:
+//! One step is three parallel passes (four in a periodic cell), each deterministic whatever the
+//! thread count:
 //! 1. per grain: its shape and velocity field (`frames`);
 //! 2. per candidate pair: contact geometry and force, written to the pair's own slot
 //!    ([`pairs`]: circles eight pairs at a time);
-//! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update;
+//! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update
+//!    (`grain_pass.rs`);
 //! 4. in a periodic cell (SPEC §14), per grain: carried by the cell's affine deformation over the
 //!    step and wrapped back into the cell (`World::follow_cell`).
 //!
@@ -19,6 +21,7 @@
 //! such chunk, so that they depend neither on the thread count nor on when the neighbour list
 //! was built.
 
+mod grain_pass;
 pub mod instability;
 pub mod pairs;
 pub mod parameters;
@@ -26,19 +29,16 @@ pub mod parameters;
 pub use instability::Instability;
 pub use parameters::Parameters;
 
-use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
+use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
-use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
-use crate::geometry::circle::disc_wall;
 use crate::geometry::contour::QUARTER_TURN;
-use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
-use crate::grain::adaptive::stress_invariants;
-use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
+use crate::geometry::{Contours, GrainShape, PairHint};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::Real;
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
+use grain_pass::GrainPass;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -747,27 +747,34 @@ impl World {
         self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
 
         let params = &self.params;
-        let contours = &self.contours;
-        let frames = &self.frames;
         let cell = self.cell();
         // A periodic cell's virtual walls meet no grain.
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
-        let neighbors = &self.neighbors;
-        let (pair_active, pair_contacts) = (&self.pair_active, &self.pair_contacts);
-        let frictional_pairs = params.frictional_pairs();
         let wall_friction = params
             .friction
             .as_ref()
             .map_or([0.0; MAX_WALLS], |f| f.walls);
-        // A frictional wall drops the springs of the grains it no longer touches.
-        let wall_springs = (0..walls.len()).any(|w| wall_friction[w] > 0.0);
         // The affine carry over this step: from the box now to the box after the walls' move
         // at its end. Applied to each grain right after its update, where the pass has the
         // grain at hand (a pass of its own after the step cost some 4% of a 10⁵-grain run).
         let carried_box = (self.affine_carry && cell.is_none())
             .then(|| (box_corners(walls), box_corners_after(walls, params.dt)));
-        let carry = carried_box.map(|(from, to)| BoxCarry::new(from, to));
-        let step = self.step;
+        let pass = GrainPass {
+            params,
+            contours: &self.contours,
+            frames: &self.frames,
+            neighbors: &self.neighbors,
+            pair_active: &self.pair_active,
+            pair_contacts: &self.pair_contacts,
+            frictional_pairs: params.frictional_pairs(),
+            cell,
+            walls,
+            wall_friction,
+            // A frictional wall drops the springs of the grains it no longer touches.
+            wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
+            carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
+            step: self.step,
+        };
         let chunk_sums: Vec<ChunkSums> = self
             .grains
             .par_chunks_mut(GRAIN_CHUNK)
@@ -776,130 +783,13 @@ impl World {
             .zip(self.wall_history.par_chunks_mut(GRAIN_CHUNK))
             .enumerate()
             .map(|(chunk, (((grains, stresses), levels), wall_histories))| {
-                let mut sums = ChunkSums::default();
-                let first = chunk * GRAIN_CHUNK;
-                let near_wall = walls_in_reach(&frames[first..first + grains.len()], walls);
-                // The walls the chunk's grains visit: none unless one is within reach or has
-                // springs to drop.
-                let chunk_walls = if wall_springs || near_wall.iter().any(|&near| near) {
-                    walls
-                } else {
-                    &[]
-                };
-                for (k, (((grain, stress), level), wall_history)) in grains
-                    .iter_mut()
-                    .zip(stresses.iter_mut())
-                    .zip(levels.iter_mut())
-                    .zip(wall_histories.iter_mut())
-                    .enumerate()
-                {
-                    let g = chunk * GRAIN_CHUNK + k;
-                    let frame = &frames[g];
-                    let mut load = if frictional_pairs {
-                        pair_load::<true>(g, frame, neighbors, pair_active, pair_contacts, &cell)
-                    } else {
-                        pair_load::<false>(g, frame, neighbors, pair_active, pair_contacts, &cell)
-                    };
-                    for (w, wall) in chunk_walls.iter().enumerate() {
-                        // A contact that is open this step drops its history. A wall without
-                        // friction never has one: its row is left untouched, not rewritten
-                        // with zeros every step.
-                        let history = if wall_friction[w] > 0.0 {
-                            std::mem::take(&mut wall_history[w])
-                        } else {
-                            0.0
-                        };
-                        // Most grains are far from every wall: skip the call.
-                        if !near_wall[w] || wall.height(frame.center) >= frame.bounding_radius {
-                            continue;
-                        }
-                        let overlap = if frame.circle {
-                            disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
-                        } else {
-                            contours.grain_wall(&frame.shape(), wall.point, wall.normal)
-                        };
-                        match overlap {
-                            Overlap::Separate => {}
-                            Overlap::Swallowed => {
-                                sums.failure.get_or_insert(Instability::Swallowed {
-                                    step,
-                                    grain: g,
-                                    other: None,
-                                });
-                            }
-                            Overlap::Contact(c) => {
-                                match params.law.response(c.length, c.normal_gap) {
-                                    Err(exit) => {
-                                        sums.failure.get_or_insert(Instability::ContactDomain {
-                                            step,
-                                            grain: g,
-                                            other: None,
-                                            length: exit.length,
-                                            normal_gap: exit.normal_gap,
-                                        });
-                                    }
-                                    Ok(response) => {
-                                        // The wall is the contact's second body.
-                                        let relative_velocity =
-                                            wall.velocity - frame.velocity_at(c.point);
-                                        let gap_rate = relative_velocity.dot(c.normal);
-                                        let f = damped_normal_force(
-                                            response.force,
-                                            response.stiffness,
-                                            frame.mass,
-                                            params.contact_damping,
-                                            gap_rate,
-                                        );
-                                        let normal_force = f * c.normal;
-                                        let mut force = normal_force;
-                                        if let Some(friction) = &params.friction
-                                            && friction.walls[w] > 0.0
-                                        {
-                                            let t = friction.law.response(
-                                                history,
-                                                response.stiffness,
-                                                f,
-                                                relative_velocity.dot(c.normal.perp()),
-                                                friction.walls[w],
-                                                frame.mass,
-                                                params.dt,
-                                            );
-                                            wall_history[w] = t.history;
-                                            force += t.force * c.normal.perp();
-                                            sums.totals.friction_dissipation += t.dissipated;
-                                            sums.totals.sliding_contacts += t.sliding as u64;
-                                        }
-                                        load.add(force, c.point - frame.center, c.cap_area_i);
-                                        load.wall_contacts += 1;
-                                        sums.totals.wall_force[w] += normal_force.dot(wall.normal);
-                                        sums.totals.capped_contacts += response.capped as u64;
-                                    }
-                                }
-                            }
-                        }
-                    }
-                    let update = advance_grain(params, grain, level, &load, g, step);
-                    sums.totals.level_counts[level.level.index()] += 1;
-                    *stress = update.stress;
-                    if let Err(e) = update.result {
-                        sums.failure.get_or_insert(e);
-                    }
-                    sums.totals.grain_area += update.area;
-                    sums.totals.kinetic_energy += update.kinetic_energy;
-                    if cell.is_some() {
-                        let m = grain.mass(params.material.density);
-                        let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
-                        for (sum, x) in sums.momentum_flux.iter_mut().zip(flux) {
-                            *sum += x;
-                        }
-                    }
-                    sums.totals.elastic_energy += update.elastic_energy;
-                    sums.contact_ends += load.contacts as u64;
-                    if let Some(carry) = &carry {
-                        grain.center = carry.apply(grain.center);
-                    }
-                }
-                sums
+                pass.chunk(
+                    chunk * GRAIN_CHUNK,
+                    grains,
+                    stresses,
+                    levels,
+                    wall_histories,
+                )
             })
             .collect();
 
@@ -1094,322 +984,6 @@ fn prefetch<T>(value: &T) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = value;
-}
-
-/// For each wall, whether a grain of `frames` (a chunk of the grain pass) may reach it: false
-/// when the box around the grains' bounding circles clears the wall, so that the grain pass
-/// tests no grain of the chunk against it. Most chunks of a large sample are clear of every
-/// wall, and four tests a chunk replace four a grain.
-fn walls_in_reach(frames: &[Frame], walls: &[Wall]) -> [bool; MAX_WALLS] {
-    let mut near = [false; MAX_WALLS];
-    if walls.is_empty() || frames.is_empty() {
-        return near;
-    }
-    let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
-    // min and max pass a NaN over; the sum does not (nor an infinity), and a chunk with a
-    // value that is not finite has every wall tested, as before.
-    let mut sum = 0.0;
-    for frame in frames {
-        let reach = DVec2::splat(frame.bounding_radius);
-        lo = lo.min(frame.center - reach);
-        hi = hi.max(frame.center + reach);
-        sum += frame.center.x + frame.center.y + frame.bounding_radius;
-    }
-    for (near, wall) in near.iter_mut().zip(walls) {
-        *near = !sum.is_finite() || !wall.clears_box(lo, hi);
-    }
-    near
-}
-
-/// The contact forces of grain `g`'s pairs on it (`frame`: the grain at the start of the step),
-/// summed in increasing pair order: the pairs `[i, g]` come before the pairs `[g, j]`.
-/// `FRICTIONAL`: whether a pair may carry a tangential force (see
-/// [`PairContact::force_on_first_in`]).
-#[inline(always)]
-fn pair_load<const FRICTIONAL: bool>(
-    g: usize,
-    frame: &Frame,
-    neighbors: &NeighborList,
-    pair_active: &[bool],
-    pair_contacts: &[PairContact],
-    cell: &Option<PeriodicCell>,
-) -> ContactLoad {
-    let mut load = ContactLoad::default();
-    // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in the
-    // gas.
-    for &pair in neighbors.second_ends_of(g) {
-        let pair = pair as usize;
-        if !pair_active[pair] {
-            continue;
-        }
-        let c = &pair_contacts[pair];
-        // The contact point lies at the image of this grain that met the first.
-        let image = match cell {
-            Some(cell) => cell.image_shift(neighbors.images[pair]),
-            None => DVec2::ZERO,
-        };
-        load.add(
-            -c.force_on_first_in::<FRICTIONAL>(),
-            c.point - (frame.center + image),
-            c.cap_area_second,
-        );
-        load.contacts += 1;
-    }
-    for pair in neighbors.first_ends_of(g) {
-        if !pair_active[pair] {
-            continue;
-        }
-        let c = &pair_contacts[pair];
-        load.add(
-            c.force_on_first_in::<FRICTIONAL>(),
-            c.point - frame.center,
-            c.cap_area_first,
-        );
-        load.contacts += 1;
-    }
-    load
-}
-
-/// The sums a grain needs from its contacts.
-#[derive(Debug, Clone, Copy)]
-struct ContactLoad {
-    force: DVec2,
-    torque: f64,
-    /// `sum_c f_c (x) r_c`: column b holds `f r_b`.
-    moment: DMat2,
-    lost_area: f64,
-    contacts: u32,
-    wall_contacts: u32,
-}
-
-// Not derived: glam's `DMat2::default()` is the identity, and the moment sum must start at zero.
-impl Default for ContactLoad {
-    fn default() -> Self {
-        Self {
-            force: DVec2::ZERO,
-            torque: 0.0,
-            moment: DMat2::ZERO,
-            lost_area: 0.0,
-            contacts: 0,
-            wall_contacts: 0,
-        }
-    }
-}
-
-impl ContactLoad {
-    #[inline]
-    fn add(&mut self, force: DVec2, arm: DVec2, cap_area: f64) {
-        self.force += force;
-        self.torque += arm.perp_dot(force);
-        self.moment += DMat2::from_cols(force * arm.x, force * arm.y);
-        self.lost_area += cap_area;
-    }
-}
-
-struct GrainUpdate {
-    result: Result<(), Instability>,
-    stress: GrainStress,
-    area: f64,
-    elastic_energy: f64,
-    /// After the update.
-    kinetic_energy: f64,
-}
-
-/// Stresses, accelerations and the symplectic Euler update of one grain (SPEC §3–§6).
-fn advance_grain(
-    params: &Parameters,
-    grain: &mut Grain,
-    level: &mut GrainLevel,
-    load: &ContactLoad,
-    index: usize,
-    step: u64,
-) -> GrainUpdate {
-    let material = &params.material;
-    let density = material.density;
-    let dt = params.dt;
-    let reference_area = grain.reference_area();
-    let lost_fraction = load.lost_area / reference_area;
-    let current_area = grain.ellipse_area() - load.lost_area;
-
-    // Love–Weber stress (eq. 47) and its components in the principal frame {e1, e2}, which only
-    // a deforming grain needs (a rigid one skips the sine and cosine of theta + alpha).
-    let symmetric = 0.5 * (load.moment + load.moment.transpose());
-    let external = symmetric * (1.0 / current_area.max(f64::MIN_POSITIVE));
-    let (ext11, ext22, ext12) = if level.level == ModelLevel::Rigid {
-        (0.0, 0.0, 0.0)
-    } else {
-        let e1 = grain.principal_direction();
-        let e2 = e1.perp();
-        (
-            e1.dot(external * e1),
-            e2.dot(external * e2),
-            e1.dot(external * e2),
-        )
-    };
-    let (sigma1, sigma2) = principal_stress(material, grain.eps1, grain.eps2, lost_fraction);
-    let stress = GrainStress {
-        external: [external.x_axis.x, external.y_axis.y, external.y_axis.x],
-        principal: [sigma1, sigma2],
-        lost_area: load.lost_area,
-        contacts: load.contacts,
-        wall_contacts: load.wall_contacts,
-    };
-    let elastic_energy =
-        reference_area * strain_energy_density(material, grain.eps1, grain.eps2, lost_fraction);
-
-    // Rigid-body motion.
-    let mass = grain.mass(density);
-    grain.velocity += load.force * (dt / mass);
-    if params.gravity != DVec2::ZERO {
-        grain.velocity += params.gravity * dt;
-    }
-    grain.omega += load.torque / grain.rotational_inertia_of_mass(mass) * dt;
-    grain.center += grain.velocity * dt;
-    grain.theta += grain.omega * dt;
-
-    // Deformation (tension positive, eq. 4 of SPEC): eps_dd = 4 s / (rho R^2) - gamma rate,
-    // M_eps scaled by the deformation mass scale.
-    let inv_modal_mass =
-        4.0 / (density * grain.radius * grain.radius * params.deformation_mass_scale);
-    let damping = params.deformation_damping;
-    let (s11, s22) = (ext11 - sigma1, ext22 - sigma2);
-    match level.level {
-        ModelLevel::Rigid => {}
-        ModelLevel::Volumetric => {
-            // The mean strain eps evolves, the deviator eps1 - eps2 and alpha are held (zero for
-            // a grain that never deformed: then eps1 = eps2 = eps): generalized mass 2 M_eps,
-            // force pi R^2 (s11 + s22).
-            let mean_rate = 0.5 * (grain.eps1_rate + grain.eps2_rate);
-            let acc = 0.5 * inv_modal_mass * (s11 + s22) - damping * mean_rate;
-            let mean_rate = mean_rate + acc * dt;
-            let half_difference = 0.5 * (grain.eps1 - grain.eps2);
-            let mean = 0.5 * (grain.eps1 + grain.eps2) + mean_rate * dt;
-            grain.eps1_rate = mean_rate;
-            grain.eps2_rate = mean_rate;
-            grain.eps1 = mean + half_difference;
-            grain.eps2 = mean - half_difference;
-        }
-        ModelLevel::Full => {
-            grain.eps1_rate += (inv_modal_mass * s11 - damping * grain.eps1_rate) * dt;
-            grain.eps2_rate += (inv_modal_mass * s22 - damping * grain.eps2_rate) * dt;
-            let difference = grain.eps1 - grain.eps2;
-            // eq. 60: M_alpha / M_eps = 2 (eps1 - eps2)^2; below k_alpha the alpha force is dropped.
-            let alpha_force_acc = if 2.0 * difference * difference > params.k_alpha {
-                inv_modal_mass * ext12 / (difference * params.alpha_mass_scale)
-            } else {
-                0.0
-            };
-            grain.alpha_rate += (alpha_force_acc - damping * grain.alpha_rate) * dt;
-            grain.eps1 += grain.eps1_rate * dt;
-            grain.eps2 += grain.eps2_rate * dt;
-            grain.alpha += grain.alpha_rate * dt;
-        }
-    }
-    if material.is_incompressible() && level.level != ModelLevel::Rigid {
-        // SPEC §6: keep the deviator, restore the area; the mean strain rate follows the
-        // corrected mean strain so that rates stay consistent with positions.
-        let mean_before =
-            0.5 * (grain.eps1 + grain.eps2) - 0.5 * (grain.eps1_rate + grain.eps2_rate) * dt;
-        let (eps1, eps2) = incompressible_strains(grain.eps1, grain.eps2, lost_fraction);
-        let mean_rate = (0.5 * (eps1 + eps2) - mean_before) / dt;
-        let half_difference_rate = 0.5 * (grain.eps1_rate - grain.eps2_rate);
-        grain.eps1 = eps1;
-        grain.eps2 = eps2;
-        grain.eps1_rate = mean_rate + half_difference_rate;
-        grain.eps2_rate = mean_rate - half_difference_rate;
-    }
-
-    if let Some(adaptive) = &params.adaptive {
-        let (mean, deviator) = stress_invariants(stress.external);
-        let inv_young = 1.0 / material.young;
-        let next = adaptive
-            .settings
-            .next_level(*level, mean * inv_young, deviator * inv_young);
-        if next.level < level.level {
-            freeze(grain, next.level);
-        }
-        *level = next;
-    }
-
-    let result = check_grain(grain, material.young / density, index, step);
-    GrainUpdate {
-        result,
-        stress,
-        area: current_area,
-        elastic_energy,
-        kinetic_energy: grain.kinetic_energy_of_mass(mass, params.deformation_mass_scale),
-    }
-}
-
-/// Zeroes the rates of the degrees of freedom a grain loses when it steps down to `level`; the
-/// values themselves are held (the shape does not jump).
-fn freeze(grain: &mut Grain, level: ModelLevel) {
-    match level {
-        ModelLevel::Rigid => {
-            grain.eps1_rate = 0.0;
-            grain.eps2_rate = 0.0;
-            grain.alpha_rate = 0.0;
-        }
-        ModelLevel::Volumetric => {
-            let mean_rate = 0.5 * (grain.eps1_rate + grain.eps2_rate);
-            grain.eps1_rate = mean_rate;
-            grain.eps2_rate = mean_rate;
-            grain.alpha_rate = 0.0;
-        }
-        ModelLevel::Full => {}
-    }
-}
-
-/// The per-grain failures of SPEC §9.
-fn check_grain(
-    grain: &Grain,
-    wave_speed_squared: f64,
-    index: usize,
-    step: u64,
-) -> Result<(), Instability> {
-    let values = [
-        grain.center.x,
-        grain.center.y,
-        grain.velocity.x,
-        grain.velocity.y,
-        grain.theta,
-        grain.omega,
-        grain.eps1,
-        grain.eps1_rate,
-        grain.eps2,
-        grain.eps2_rate,
-        grain.alpha,
-        grain.alpha_rate,
-    ];
-    // The common case is all finite, and a sum is finite only if every term is (a NaN or an
-    // infinity makes it NaN or infinite): one test, summed as a tree so that the adds run side
-    // by side. Only a sum that is not finite (or that overflowed) has each value tested.
-    let sum = values
-        .chunks_exact(4)
-        .map(|q| (q[0] + q[1]) + (q[2] + q[3]))
-        .fold(0.0, |total, part| total + part);
-    if !sum.is_finite() && !values.iter().all(|v| v.is_finite()) {
-        return Err(Instability::NonFinite { step, grain: index });
-    }
-    if grain.eps1 <= -1.0 || grain.eps2 <= -1.0 {
-        return Err(Instability::Inverted {
-            step,
-            grain: index,
-            eps1: grain.eps1,
-            eps2: grain.eps2,
-        });
-    }
-    // A grain moving faster than the elastic wave speed sqrt(E/rho) has been thrown by a
-    // numerical instability, not by any quasi-static load.
-    let speed_squared = grain.velocity.length_squared();
-    if speed_squared > wave_speed_squared {
-        return Err(Instability::Runaway {
-            step,
-            grain: index,
-            speed: speed_squared.sqrt(),
-        });
-    }
-    Ok(())
 }
 
 #[cfg(test)]
