@@ -10,6 +10,7 @@
 //! preserve incidence, convexity and the order of the nodes, so "inside the polygon" and "where
 //! does a segment leave the polygon" are answered exactly there, with a table of the N-gon.
 
+use super::angle;
 use glam::{DMat2, DVec2};
 
 /// The unit regular polygon shared by every grain of a run: node directions and edge normals.
@@ -48,7 +49,7 @@ impl ContourTable {
         let dbeta = std::f64::consts::TAU / nodes as f64;
         let vertex = (0..nodes)
             .map(|k| {
-                let (s, c) = (k as f64 * dbeta).sin_cos();
+                let (s, c) = angle::sin_cos(k as f64 * dbeta);
                 DVec2::new(c, s)
             })
             .collect::<Vec<DVec2>>();
@@ -60,7 +61,7 @@ impl ContourTable {
             .collect();
         let edges = (0..nodes)
             .map(|k| {
-                let (s, c) = ((k as f64 + 0.5) * dbeta).sin_cos();
+                let (s, c) = angle::sin_cos((k as f64 + 0.5) * dbeta);
                 Edge {
                     start: vertex[k],
                     end: vertex[(k + 1) % nodes],
@@ -74,9 +75,9 @@ impl ContourTable {
             vertex,
             vertex_ring,
             edges,
-            apothem: (0.5 * dbeta).cos(),
-            apothem_squared: (0.5 * dbeta).cos().powi(2),
-            sin_dbeta: dbeta.sin(),
+            apothem: angle::cos(0.5 * dbeta),
+            apothem_squared: angle::cos(0.5 * dbeta).powi(2),
+            sin_dbeta: angle::sin(dbeta),
         }
     }
 
@@ -291,7 +292,7 @@ pub struct GrainShape {
 /// The deformation gradient `A = Q(theta) U` of SPEC §2 (paper eq. 49–53).
 pub fn deformation_gradient(theta: f64, eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
     let stretch = principal_stretch(eps1, eps2, alpha);
-    DMat2::from_angle(theta) * stretch
+    angle::rotation_by(theta) * stretch
 }
 
 /// The rotation `Q` by the angle whose sine and cosine are given (what `DMat2::from_angle`
@@ -306,7 +307,7 @@ pub const QUARTER_TURN: DMat2 = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::ne
 
 /// The symmetric stretch `U = I + Q(alpha) diag(eps1, eps2) Q(alpha)^T`.
 pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
-    let (s, c) = alpha.sin_cos();
+    let (s, c) = angle::sin_cos(alpha);
     stretch_from(eps1, eps2, s, c)
 }
 
@@ -367,7 +368,7 @@ impl GrainShape {
 
     /// Area of the full contour polygon: `N/2 sin(dbeta) det(A R)`.
     pub fn polygon_area(&self, table: &ContourTable) -> f64 {
-        0.5 * table.nodes as f64 * table.dbeta.sin() * self.map.determinant()
+        0.5 * table.nodes as f64 * angle::sin(table.dbeta) * self.map.determinant()
     }
 }
 

@@ -10,6 +10,7 @@
 //! Sign conventions: the contact normal `n` points from grain i towards grain j (or towards the
 //! wall); gaps are negative when the contours interpenetrate.
 
+use super::angle;
 use super::contour::{ContourTable, GrainShape};
 use glam::{DMat2, DVec2};
 
@@ -251,9 +252,9 @@ fn deepest_inside_node(
 ) -> Option<isize> {
     let RelativeMap { m, t } = *a_in_b;
     let toward_b = a.inv_map * (b.center - a.center);
-    let mut beta = toward_b.y.atan2(toward_b.x);
+    let mut beta = angle::atan2(toward_b.y, toward_b.x);
     for _ in 0..2 {
-        let (s, c) = beta.sin_cos();
+        let (s, c) = angle::sin_cos(beta);
         let u = DVec2::new(c, s);
         let mu = m * u;
         let mdu = m * DVec2::new(-s, c);
@@ -594,7 +595,7 @@ pub fn grain_wall(
         |k: isize| center_height + grain.node_offset(table, table.wrap(k)).dot(wall_normal);
     // The deepest point of the smooth contour: reference direction -(A R)^T n.
     let deepest = -(grain.map.transpose() * wall_normal);
-    let k0 = table.nearest_node(deepest.y.atan2(deepest.x));
+    let k0 = table.nearest_node(angle::atan2(deepest.y, deepest.x));
     let Some(k_seed) = [0, -1, 1]
         .into_iter()
         .map(|dk| k0 + dk)

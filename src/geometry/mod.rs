@@ -3,6 +3,7 @@
 //! phase that finds the candidate pairs; with exact contours, the same contacts of the grains'
 //! ellipses.
 
+pub mod angle;
 pub mod broadphase;
 pub mod circle;
 pub mod contour;

@@ -4,6 +4,7 @@
 //! field of a grain together; the contact kernels read a separate compact array of
 //! [`GrainShape`](crate::geometry::GrainShape)s built once per step.
 
+use crate::geometry::angle;
 use crate::geometry::contour::{
     GrainShape, QUARTER_TURN, principal_stretch, rotation, stretch_from,
 };
@@ -122,7 +123,7 @@ impl Grain {
     /// Direction of the principal axis e1, at angle theta + alpha.
     #[inline]
     pub fn principal_direction(&self) -> DVec2 {
-        DVec2::from_angle(self.theta + self.alpha)
+        angle::unit_vector(self.theta + self.alpha)
     }
 
     pub fn shape(&self) -> GrainShape {
@@ -140,11 +141,11 @@ impl Grain {
     /// point at x moves at `velocity + L (x - center)`. With `A = Q(theta) U`,
     /// `L = omega J + Q(theta) (dU/dt) U^-1 Q(theta)^T`, J the rotation by 90 degrees.
     pub fn velocity_gradient(&self) -> DMat2 {
-        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let (sin_alpha, cos_alpha) = angle::sin_cos(self.alpha);
         let stretch = principal_stretch(self.eps1, self.eps2, self.alpha);
         self.velocity_gradient_from(
             rotation(sin_alpha, cos_alpha),
-            DMat2::from_angle(self.theta),
+            angle::rotation_by(self.theta),
             stretch,
         )
     }
@@ -152,8 +153,8 @@ impl Grain {
     /// [`Grain::shape`] and [`Grain::velocity_gradient`] together: the sines and cosines of
     /// theta and alpha are computed once (they were a tenth of the cost of a dense step).
     pub fn shape_and_velocity_gradient(&self) -> (GrainShape, DMat2) {
-        let (sin_theta, cos_theta) = self.theta.sin_cos();
-        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let (sin_theta, cos_theta) = angle::sin_cos(self.theta);
+        let (sin_alpha, cos_alpha) = angle::sin_cos(self.alpha);
         let rot = rotation(sin_theta, cos_theta);
         let stretch = stretch_from(self.eps1, self.eps2, sin_alpha, cos_alpha);
         let shape = GrainShape::from_deformation(

@@ -1161,7 +1161,7 @@ impl Scenario {
                 ));
             }
             let (nx, ny) = plane.normal;
-            let length = nx.hypot(ny);
+            let length = libm::hypot(nx, ny);
             if !(length.is_finite() && length > 0.0) {
                 return Err(invalid(
                     &format!("planes[{k}].normal"),
