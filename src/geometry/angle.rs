@@ -44,7 +44,7 @@ pub fn unit_vector(angle: f64) -> DVec2 {
 #[inline]
 pub fn rotation_by(angle: f64) -> DMat2 {
     let (s, c) = sin_cos(angle);
-    DMat2::from_cols(DVec2::new(c, s), DVec2::new(-s, c))
+    super::contour::rotation(s, c)
 }
 
 #[cfg(test)]
