@@ -63,8 +63,6 @@ impl GrainPass<'_> {
         } else {
             &[]
         };
-        let (neighbors, pair_active, pair_contacts) =
-            (self.neighbors, self.pair_active, self.pair_contacts);
         for (k, (((grain, stress), level), wall_history)) in grains
             .iter_mut()
             .zip(stresses.iter_mut())
@@ -75,9 +73,9 @@ impl GrainPass<'_> {
             let g = first + k;
             let frame = &self.frames[g];
             let mut load = if self.frictional_pairs {
-                pair_load::<true>(g, frame, neighbors, pair_active, pair_contacts, &self.cell)
+                self.pair_load::<true>(g, frame)
             } else {
-                pair_load::<false>(g, frame, neighbors, pair_active, pair_contacts, &self.cell)
+                self.pair_load::<false>(g, frame)
             };
             for (w, wall) in chunk_walls.iter().enumerate() {
                 // A contact that is open this step drops its history. A wall without friction
@@ -178,6 +176,50 @@ impl GrainPass<'_> {
         }
         sums
     }
+
+    /// The contact forces of grain `g`'s pairs on it (`frame`: the grain at the start of the
+    /// step), summed in increasing pair order: the pairs `[i, g]` come before the pairs
+    /// `[g, j]`. `FRICTIONAL`: whether a pair may carry a tangential force (see
+    /// [`PairContact::force_on_first_in`]).
+    #[inline(always)]
+    fn pair_load<const FRICTIONAL: bool>(&self, g: usize, frame: &Frame) -> ContactLoad {
+        let (neighbors, pair_active, pair_contacts) =
+            (self.neighbors, self.pair_active, self.pair_contacts);
+        let mut load = ContactLoad::default();
+        // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in
+        // the gas.
+        for &pair in neighbors.second_ends_of(g) {
+            let pair = pair as usize;
+            if !pair_active[pair] {
+                continue;
+            }
+            let c = &pair_contacts[pair];
+            // The contact point lies at the image of this grain that met the first.
+            let image = match &self.cell {
+                Some(cell) => cell.image_shift(neighbors.images[pair]),
+                None => DVec2::ZERO,
+            };
+            load.add(
+                -c.force_on_first_in::<FRICTIONAL>(),
+                c.point - (frame.center + image),
+                c.cap_area_second,
+            );
+            load.contacts += 1;
+        }
+        for pair in neighbors.first_ends_of(g) {
+            if !pair_active[pair] {
+                continue;
+            }
+            let c = &pair_contacts[pair];
+            load.add(
+                c.force_on_first_in::<FRICTIONAL>(),
+                c.point - frame.center,
+                c.cap_area_first,
+            );
+            load.contacts += 1;
+        }
+        load
+    }
 }
 
 /// For each wall, whether a grain of `frames` (a chunk of the grain pass) may reach it: false
@@ -203,55 +245,6 @@ fn walls_in_reach(frames: &[Frame], walls: &[Wall]) -> [bool; MAX_WALLS] {
         *near = !sum.is_finite() || !wall.clears_box(lo, hi);
     }
     near
-}
-
-/// The contact forces of grain `g`'s pairs on it (`frame`: the grain at the start of the step),
-/// summed in increasing pair order: the pairs `[i, g]` come before the pairs `[g, j]`.
-/// `FRICTIONAL`: whether a pair may carry a tangential force (see
-/// [`PairContact::force_on_first_in`]).
-#[inline(always)]
-fn pair_load<const FRICTIONAL: bool>(
-    g: usize,
-    frame: &Frame,
-    neighbors: &NeighborList,
-    pair_active: &[bool],
-    pair_contacts: &[PairContact],
-    cell: &Option<PeriodicCell>,
-) -> ContactLoad {
-    let mut load = ContactLoad::default();
-    // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in the
-    // gas.
-    for &pair in neighbors.second_ends_of(g) {
-        let pair = pair as usize;
-        if !pair_active[pair] {
-            continue;
-        }
-        let c = &pair_contacts[pair];
-        // The contact point lies at the image of this grain that met the first.
-        let image = match cell {
-            Some(cell) => cell.image_shift(neighbors.images[pair]),
-            None => DVec2::ZERO,
-        };
-        load.add(
-            -c.force_on_first_in::<FRICTIONAL>(),
-            c.point - (frame.center + image),
-            c.cap_area_second,
-        );
-        load.contacts += 1;
-    }
-    for pair in neighbors.first_ends_of(g) {
-        if !pair_active[pair] {
-            continue;
-        }
-        let c = &pair_contacts[pair];
-        load.add(
-            c.force_on_first_in::<FRICTIONAL>(),
-            c.point - frame.center,
-            c.cap_area_first,
-        );
-        load.contacts += 1;
-    }
-    load
 }
 
 /// The sums a grain needs from its contacts.
