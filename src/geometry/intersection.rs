@@ -78,8 +78,31 @@ struct Chain {
 
 enum ChainSearch {
     Empty,
-    Found(Chain),
+    Found(Chain, ChainBorders),
     Whole,
+}
+
+/// A chain's end nodes and their outside neighbours (lo - 1 and hi + 1), mapped into the other
+/// grain's reference coordinates: what the inside tests that settle the chain computed, and
+/// what the two crossings are cut from.
+#[derive(Debug, Clone, Copy)]
+struct ChainBorders {
+    lo_in: DVec2,
+    lo_out: DVec2,
+    hi_in: DVec2,
+    hi_out: DVec2,
+}
+
+impl ChainBorders {
+    #[inline(always)]
+    fn of(table: &ContourTable, a_in_b: &RelativeMap, chain: Chain) -> Self {
+        Self {
+            lo_in: a_in_b.node(table, chain.lo),
+            lo_out: a_in_b.node(table, chain.lo - 1),
+            hi_in: a_in_b.node(table, chain.hi),
+            hi_out: a_in_b.node(table, chain.hi + 1),
+        }
+    }
 }
 
 /// The affine map from `a`'s reference coordinates to `b`'s: `u_b = m u_a + t`.
@@ -151,6 +174,13 @@ fn chain_inside(
     let inside = InsidePolygon { table, a_in_b };
 
     let n = table.nodes as isize;
+    if let Some((chain, borders)) = last_chain_moved(table, a_in_b, hint, n) {
+        *hint = ChainHint {
+            lo: table.wrap(chain.lo) as i32,
+            hi: table.wrap(chain.hi) as i32,
+        };
+        return ChainSearch::Found(chain, borders);
+    }
     let half = n / 2;
     let ends = match hinted_ends(&inside, hint, n) {
         Some(ends) => ends,
@@ -178,12 +208,75 @@ fn chain_inside(
         lo: table.wrap(lo) as i32,
         hi: table.wrap(hi) as i32,
     };
+    let chain = Chain { lo, hi };
+    ChainSearch::Found(chain, ChainBorders::of(table, a_in_b, chain))
+}
 
-    ChainSearch::Found(Chain { lo, hi })
+/// Last step's chain, when each of its ends has moved by at most one node: its ends inside,
+/// their outer neighbours outside, and shorter than half the contour. The inside nodes form one
+/// run, and a run through both ends that leaves out the node before `lo` is `lo..=hi`: so these
+/// are exactly the ends [`hinted_ends`] would find, found with four to six inside tests. They
+/// settle nearly every contact between two steps, and the nodes they map are the crossings'
+/// segments.
+#[inline(always)]
+fn last_chain_moved(
+    table: &ContourTable,
+    a_in_b: &RelativeMap,
+    hint: &ChainHint,
+    n: isize,
+) -> Option<(Chain, ChainBorders)> {
+    if hint.lo < 0 {
+        return None;
+    }
+    let lo = hint.lo as isize;
+    let mut hi = hint.hi as isize;
+    if hi < lo {
+        hi += n;
+    }
+    let node = |k: isize| a_in_b.node(table, k);
+    let (lo, lo_in, lo_out) = end_moved(table, &node, lo, -1)?;
+    let (hi, hi_in, hi_out) = end_moved(table, &node, hi, 1)?;
+    if hi < lo || hi - lo >= n / 2 {
+        return None;
+    }
+    Some((
+        Chain { lo, hi },
+        ChainBorders {
+            lo_in,
+            lo_out,
+            hi_in,
+            hi_out,
+        },
+    ))
+}
+
+/// Where one end of a chain lies now, when it has moved by at most one node from `end` (the
+/// chain runs on from it in the direction `-outward`): the end, its node and the node beyond
+/// it (outside), mapped; None when it moved further.
+#[inline(always)]
+fn end_moved(
+    table: &ContourTable,
+    node: &impl Fn(isize) -> DVec2,
+    end: isize,
+    outward: isize,
+) -> Option<(isize, DVec2, DVec2)> {
+    let (at_end, beyond) = (node(end), node(end + outward));
+    if !table.contains(at_end) {
+        let back = node(end - outward);
+        return table
+            .contains(back)
+            .then_some((end - outward, back, at_end));
+    }
+    if !table.contains(beyond) {
+        return Some((end, at_end, beyond));
+    }
+    let further = node(end + 2 * outward);
+    (!table.contains(further)).then_some((end + outward, beyond, further))
 }
 
 /// Where `a`'s edge from node `k_in` (inside b) to `k_out` (outside b) leaves `b`'s polygon
-/// (global coordinates), and the edge of b it leaves through.
+/// (global coordinates), and the edge of b it leaves through; `p_in` and `p_out` are the two
+/// nodes in b's reference coordinates.
 ///
 /// The exit edge is looked for from a guess (last step's, or the inside node's sector): the
 /// segment is cut with the guessed edge's line and the cut accepted only if it lies within that
@@ -191,15 +284,16 @@ fn chain_inside(
 /// boundary once). A cut outside the sector moves the guess one edge towards it; after a few
 /// misses the exit is searched edge by edge from the inside node's sector.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn crossing_and_edge(
     table: &ContourTable,
     a: &GrainShape,
-    a_in_b: &RelativeMap,
     k_in: isize,
+    p_in: DVec2,
     k_out: isize,
+    p_out: DVec2,
     guess: Option<usize>,
 ) -> (DVec2, usize) {
-    let (p_in, p_out) = (a_in_b.node(table, k_in), a_in_b.node(table, k_out));
     let direction = p_out - p_in;
     let mut s = guess.unwrap_or_else(|| table.sector(p_in));
     let mut found = None;
@@ -491,29 +585,31 @@ pub fn grain_grain_hinted(
     let chain_i = match chain_inside(table, i, j, &i_in_j, &mut hint.first) {
         ChainSearch::Whole => return Overlap::Swallowed,
         ChainSearch::Empty => None,
-        ChainSearch::Found(c) => Some(c),
+        ChainSearch::Found(c, borders) => Some((c, borders)),
     };
     // Crossing points in the order of grain i's contour (counter-clockwise): i's chain runs from
     // `p_lo` to `p_hi`; j's chain runs the other way, so p_lo lies on j's edge (hi, hi+1) and
     // p_hi on j's edge (lo-1, lo). When i has nodes inside j, the two crossings are found on
     // j's polygon from i's side, and the j edges they lie on give j's chain without a search.
     let (p_lo, p_hi, chain_j) = match chain_i {
-        Some(ci) => {
+        Some((ci, borders)) => {
             let last = (hint.second.lo >= 0).then_some(hint.second);
             let (p_lo, edge_lo) = crossing_and_edge(
                 table,
                 i,
-                &i_in_j,
                 ci.lo,
+                borders.lo_in,
                 ci.lo - 1,
+                borders.lo_out,
                 last.map(|h| h.hi as usize),
             );
             let (p_hi, edge_hi) = crossing_and_edge(
                 table,
                 i,
-                &i_in_j,
                 ci.hi,
+                borders.hi_in,
                 ci.hi + 1,
+                borders.hi_out,
                 last.map(|h| table.previous(h.lo as usize)),
             );
             let chain_j = if edge_lo == edge_hi {
@@ -540,14 +636,15 @@ pub fn grain_grain_hinted(
         }
         None => {
             let j_in_i = RelativeMap::new(j, i);
-            let cj = match chain_inside(table, j, i, &j_in_i, &mut hint.second) {
+            let (cj, borders) = match chain_inside(table, j, i, &j_in_i, &mut hint.second) {
                 ChainSearch::Whole => return Overlap::Swallowed,
                 ChainSearch::Empty => return Overlap::Separate,
-                ChainSearch::Found(c) => c,
+                ChainSearch::Found(c, borders) => (c, borders),
             };
+            let (hi, lo) = (cj.hi, cj.lo);
             (
-                crossing_and_edge(table, j, &j_in_i, cj.hi, cj.hi + 1, None).0,
-                crossing_and_edge(table, j, &j_in_i, cj.lo, cj.lo - 1, None).0,
+                crossing_and_edge(table, j, hi, borders.hi_in, hi + 1, borders.hi_out, None).0,
+                crossing_and_edge(table, j, lo, borders.lo_in, lo - 1, borders.lo_out, None).0,
                 Some(cj),
             )
         }
@@ -561,7 +658,7 @@ pub fn grain_grain_hinted(
         return Overlap::Separate;
     };
     let (cap_area_i, depth_i) = match chain_i {
-        Some(c) => cap_area_and_depth(table, i, (c.lo, c.hi), p_lo, p_hi, point, normal),
+        Some((c, _)) => cap_area_and_depth(table, i, (c.lo, c.hi), p_lo, p_hi, point, normal),
         None => (0.0, 0.0),
     };
     let (cap_area_j, depth_j) = match chain_j {
@@ -921,17 +1018,27 @@ pub(super) mod tests {
             let (i, j, _) = random_pair(&mut next);
             let mut exact_hint = PairHint::default();
             let cold = grain_grain_hinted(&table, &i, &j, &mut exact_hint);
-            let shift = |h: ChainHint, d: i32| ChainHint {
-                lo: (h.lo + d).rem_euclid(n),
-                hi: (h.hi - d).rem_euclid(n),
+            let shift = |h: ChainHint, d_lo: i32, d_hi: i32| ChainHint {
+                lo: (h.lo + d_lo).rem_euclid(n),
+                hi: (h.hi + d_hi).rem_euclid(n),
             };
             let mut hints = vec![exact_hint];
             if exact_hint.first.lo >= 0 && exact_hint.second.lo >= 0 {
                 for d in [-3, -1, 1, 2, 5] {
                     hints.push(PairHint {
-                        first: shift(exact_hint.first, d),
-                        second: shift(exact_hint.second, -d),
+                        first: shift(exact_hint.first, d, -d),
+                        second: shift(exact_hint.second, -d, d),
                     });
+                }
+                // Each end moved on its own, by up to two nodes: what the search from last
+                // step's ends (`last_chain_moved`) settles or hands on.
+                for d_lo in -2..=2 {
+                    for d_hi in -2..=2 {
+                        hints.push(PairHint {
+                            first: shift(exact_hint.first, d_lo, d_hi),
+                            second: shift(exact_hint.second, d_hi, d_lo),
+                        });
+                    }
                 }
                 hints.push(PairHint {
                     first: exact_hint.second,
