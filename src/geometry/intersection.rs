@@ -171,8 +171,6 @@ fn chain_inside(
     a_in_b: &RelativeMap,
     hint: &mut ChainHint,
 ) -> ChainSearch {
-    let inside = InsidePolygon { table, a_in_b };
-
     let n = table.nodes as isize;
     if let Some((chain, borders)) = last_chain_moved(table, a_in_b, hint, n) {
         *hint = ChainHint {
@@ -181,6 +179,23 @@ fn chain_inside(
         };
         return ChainSearch::Found(chain, borders);
     }
+    chain_searched(table, a, b, a_in_b, hint)
+}
+
+/// [`chain_inside`] when last step's chain does not settle it: from the hint's ends or middle,
+/// or cold from the deepest point. Out of line, so that the step-to-step path keeps its
+/// registers.
+#[inline(never)]
+#[cold]
+fn chain_searched(
+    table: &ContourTable,
+    a: &GrainShape,
+    b: &GrainShape,
+    a_in_b: &RelativeMap,
+    hint: &mut ChainHint,
+) -> ChainSearch {
+    let inside = InsidePolygon { table, a_in_b };
+    let n = table.nodes as isize;
     let half = n / 2;
     let ends = match hinted_ends(&inside, hint, n) {
         Some(ends) => ends,
@@ -320,18 +335,25 @@ fn crossing_and_edge(
         };
     }
     // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
-    let (t, edge) = found.unwrap_or_else(|| {
-        let sector_in = table.sector(p_in);
-        let t = table.exit_parameter(
-            p_in,
-            sector_in,
-            p_out,
-            table.refine_sector(p_out, sector_in),
-        );
-        (t, table.sector(p_in + direction * t))
-    });
+    let (t, edge) = found.unwrap_or_else(|| exit_searched(table, p_in, p_out));
     let (v_in, v_out) = (table.vertex_at(k_in), table.vertex_at(k_out));
     (a.center + a.map * (v_in + (v_out - v_in) * t), edge)
+}
+
+/// The exit of the segment from `p_in` (inside the unit polygon) to `p_out` (outside) searched
+/// edge by edge, and the edge it leaves through: where the guesses of [`crossing_and_edge`]
+/// missed. Out of line, like [`chain_searched`].
+#[inline(never)]
+#[cold]
+fn exit_searched(table: &ContourTable, p_in: DVec2, p_out: DVec2) -> (f64, usize) {
+    let sector_in = table.sector(p_in);
+    let t = table.exit_parameter(
+        p_in,
+        sector_in,
+        p_out,
+        table.refine_sector(p_out, sector_in),
+    );
+    (t, table.sector(p_in + (p_out - p_in) * t))
 }
 
 /// A node of `a` inside `b` near the deepest point of `a`'s smooth contour into `b`: where
