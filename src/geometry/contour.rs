@@ -107,6 +107,16 @@ impl ContourTable {
         }
     }
 
+    /// Reference direction of node k for k in [-N, 2N), the range of a chain whose first node
+    /// lies in [0, N) (and of its neighbours): one load from the ring, where [`vertex_at`]
+    /// chooses between the ring and a wrapped index. Panics outside that range.
+    ///
+    /// [`vertex_at`]: Self::vertex_at
+    #[inline(always)]
+    pub fn vertex_near(&self, k: isize) -> DVec2 {
+        self.vertex_ring[(k + self.nodes as isize) as usize]
+    }
+
     /// Node index nearest to the reference angle `beta` (radians, any range).
     #[inline]
     pub fn nearest_node(&self, beta: f64) -> isize {

@@ -69,11 +69,26 @@ pub struct PairHint {
     pub second: ChainHint,
 }
 
-/// The nodes of one contour inside another polygon, `lo..=hi` (indices not yet wrapped).
+/// The nodes of one contour inside another polygon, `lo..=hi` (indices not yet wrapped), with
+/// `lo` in [-1, N] and `hi` under `lo + N - 1`, so that `lo - 1..=hi + 1` lies within the ring
+/// of [`ContourTable::vertex_near`].
 #[derive(Debug, Clone, Copy)]
 struct Chain {
     lo: isize,
     hi: isize,
+}
+
+impl Chain {
+    /// The chain `lo..=hi` (any turn of the contour) with `lo` moved into [0, N): the same
+    /// nodes.
+    #[inline]
+    fn from_ends(table: &ContourTable, lo: isize, hi: isize) -> Self {
+        let lo_wrapped = table.wrap(lo) as isize;
+        Self {
+            lo: lo_wrapped,
+            hi: hi + (lo_wrapped - lo),
+        }
+    }
 }
 
 enum ChainSearch {
@@ -97,10 +112,10 @@ impl ChainBorders {
     #[inline(always)]
     fn of(table: &ContourTable, a_in_b: &RelativeMap, chain: Chain) -> Self {
         Self {
-            lo_in: a_in_b.node(table, chain.lo),
-            lo_out: a_in_b.node(table, chain.lo - 1),
-            hi_in: a_in_b.node(table, chain.hi),
-            hi_out: a_in_b.node(table, chain.hi + 1),
+            lo_in: a_in_b.node_near(table, chain.lo),
+            lo_out: a_in_b.node_near(table, chain.lo - 1),
+            hi_in: a_in_b.node_near(table, chain.hi),
+            hi_out: a_in_b.node_near(table, chain.hi + 1),
         }
     }
 }
@@ -125,6 +140,12 @@ impl RelativeMap {
     #[inline]
     fn node(&self, table: &ContourTable, k: isize) -> DVec2 {
         self.m * table.vertex_at(k) + self.t
+    }
+
+    /// [`node`](Self::node) for k in [-N, 2N) (see [`ContourTable::vertex_near`]).
+    #[inline(always)]
+    fn node_near(&self, table: &ContourTable, k: isize) -> DVec2 {
+        self.m * table.vertex_near(k) + self.t
     }
 }
 
@@ -219,11 +240,11 @@ fn chain_searched(
         *hint = ChainHint::NONE;
         return ChainSearch::Whole;
     };
+    let chain = Chain::from_ends(table, lo, hi);
     *hint = ChainHint {
-        lo: table.wrap(lo) as i32,
-        hi: table.wrap(hi) as i32,
+        lo: chain.lo as i32,
+        hi: table.wrap(chain.hi) as i32,
     };
-    let chain = Chain { lo, hi };
     ChainSearch::Found(chain, ChainBorders::of(table, a_in_b, chain))
 }
 
@@ -248,7 +269,10 @@ fn last_chain_moved(
     if hi < lo {
         hi += n;
     }
-    let node = |k: isize| a_in_b.node(table, k);
+    if hi - lo >= n / 2 {
+        return None;
+    }
+    let node = |k: isize| a_in_b.node_near(table, k);
     let (lo, lo_in, lo_out) = end_moved(table, &node, lo, -1)?;
     let (hi, hi_in, hi_out) = end_moved(table, &node, hi, 1)?;
     if hi < lo || hi - lo >= n / 2 {
@@ -336,7 +360,7 @@ fn crossing_and_edge(
     }
     // The exit parameter along an edge is the same in both frames (affine maps keep ratios).
     let (t, edge) = found.unwrap_or_else(|| exit_searched(table, p_in, p_out));
-    let (v_in, v_out) = (table.vertex_at(k_in), table.vertex_at(k_out));
+    let (v_in, v_out) = (table.vertex_near(k_in), table.vertex_near(k_out));
     (a.center + a.map * (v_in + (v_out - v_in) * t), edge)
 }
 
@@ -533,8 +557,8 @@ fn cap_area_and_depth(
     outward: DVec2,
 ) -> (f64, f64) {
     let (lo, hi) = chain;
-    let first = shape.map * table.vertex_at(lo);
-    let last = shape.map * table.vertex_at(hi);
+    let first = shape.map * table.vertex_near(lo);
+    let last = shape.map * table.vertex_near(hi);
     let (from, to) = (from - shape.center, to - shape.center);
     let fan = (hi - lo) as f64 * shape.map.determinant() * table.sin_dbeta;
     let twice_area = from.perp_dot(first) + fan + last.perp_dot(to) + to.perp_dot(from);
@@ -544,10 +568,10 @@ fn cap_area_and_depth(
     let middle = sum >> 1; // floor((lo + hi) / 2), also for negative indices
     let start = (middle - 1 + (sum & 1)).max(lo);
     let end = (middle + 1).min(hi);
-    let mut reach = table.vertex_at(start).dot(support);
+    let mut reach = table.vertex_near(start).dot(support);
     let mut k = start + 1;
     while k <= end {
-        let r = table.vertex_at(k).dot(support);
+        let r = table.vertex_near(k).dot(support);
         if r > reach {
             reach = r;
         }
@@ -754,6 +778,7 @@ pub fn grain_wall(
             None => return Overlap::Swallowed,
         },
     };
+    let Chain { lo, hi } = Chain::from_ends(table, lo, hi);
     let crossing = |k_in: isize, k_out: isize| {
         let (h_in, h_out) = (node_height(k_in), node_height(k_out));
         let x_in = grain.node(table, table.wrap(k_in));
@@ -870,6 +895,58 @@ pub(super) mod tests {
             assert!(c.point.y.abs() < 1e-12);
         }
         assert!(previous < 1e-3);
+    }
+
+    #[test]
+    fn wall_caps_match_the_polygon_clipped_by_the_wall_at_any_depth_and_angle() {
+        // Expectation: the cap is the part of the contour polygon beyond the wall line (its
+        // area by clipping the polygon node by node, its depth the deepest node's), whatever
+        // the grain's orientation and strain and however deep it lies, up to more than half
+        // of it beyond the wall (the walked chains, whose ends lie far from the seed).
+        let table = ContourTable::new(1.0);
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
+        let mut next = || crate::sample::unit_random(&mut rng);
+        let mut checked = 0;
+        for _ in 0..3000 {
+            let (theta, alpha) = (40.0 * next() - 20.0, 40.0 * next() - 20.0);
+            let (eps1, eps2) = (0.6 * next() - 0.3, 0.6 * next() - 0.3);
+            let grain = GrainShape::new(DVec2::new(0.3, -0.2), 1.0, theta, eps1, eps2, alpha);
+            let normal = DVec2::from_angle(40.0 * next() - 20.0);
+            let wall_point = grain.center - normal * (grain.bounding_radius * (1.9 * next() - 0.9));
+            let height = |x: DVec2| (x - wall_point).dot(normal);
+            let nodes: Vec<DVec2> = (0..table.nodes).map(|k| grain.node(&table, k)).collect();
+            // Sutherland–Hodgman against the half-plane height < 0.
+            let mut clipped = Vec::new();
+            for k in 0..nodes.len() {
+                let (a, b) = (nodes[k], nodes[(k + 1) % nodes.len()]);
+                let (ha, hb) = (height(a), height(b));
+                if ha < 0.0 {
+                    clipped.push(a);
+                }
+                if (ha < 0.0) != (hb < 0.0) {
+                    clipped.push(a + (b - a) * (ha / (ha - hb)));
+                }
+            }
+            let area: f64 = (0..clipped.len())
+                .map(|k| clipped[k].perp_dot(clipped[(k + 1) % clipped.len()]))
+                .sum::<f64>()
+                * 0.5;
+            let depth = nodes.iter().map(|&x| -height(x)).fold(0.0, f64::max);
+            match grain_wall(&table, &grain, wall_point, normal) {
+                Overlap::Contact(c) => {
+                    assert!(
+                        (c.cap_area_i - area).abs() < 1e-10,
+                        "{} vs {area}",
+                        c.cap_area_i
+                    );
+                    assert!((c.normal_gap + depth).abs() < 1e-10);
+                    checked += 1;
+                }
+                Overlap::Separate => assert!(depth < 1e-3, "missed a cap {depth} deep"),
+                Overlap::Swallowed => assert!(nodes.iter().all(|&x| height(x) < 0.0)),
+            }
+        }
+        assert!(checked > 2000, "{checked}");
     }
 
     #[test]
