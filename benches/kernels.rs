@@ -41,6 +41,30 @@ fn grain_grain_warm(bencher: divan::Bencher, depth: f64) {
     bencher.bench_local(|| grain_grain_hinted(&table, black_box(&i), black_box(&j), &mut hint));
 }
 
+/// The hinted kernel on a pair whose contact moves between calls, as a contact under load does
+/// from step to step: grain j alternates between two positions half a node spacing (`R
+/// dbeta / 2`) apart along the line of centres, so the crossings move by about 1.7, 0.8 and
+/// 0.4 node spacings a call at the three depths (two circles' chord: `dy/dd = -d / 4y`).
+#[divan::bench(args = [0.01, 0.05, 0.15])]
+fn grain_grain_moving(bencher: divan::Bencher, depth: f64) {
+    let table = ContourTable::new(1.0);
+    let (i, j) = pair(depth);
+    let mut j_moved = j;
+    j_moved.center.x -= 0.5 * 0.012 * table.dbeta;
+    let positions = [j, j_moved];
+    let mut hint = PairHint::default();
+    let mut call = 0usize;
+    bencher.bench_local(|| {
+        call += 1;
+        grain_grain_hinted(
+            &table,
+            black_box(&i),
+            black_box(&positions[call & 1]),
+            &mut hint,
+        )
+    });
+}
+
 #[divan::bench]
 fn grain_wall_contact(bencher: divan::Bencher) {
     let table = ContourTable::new(1.0);

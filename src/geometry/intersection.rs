@@ -904,9 +904,8 @@ pub(super) mod tests {
         // the grain's orientation and strain and however deep it lies, up to more than half
         // of it beyond the wall (the walked chains, whose ends lie far from the seed).
         let table = ContourTable::new(1.0);
-        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
-        let mut next = || crate::sample::unit_random(&mut rng);
-        let mut checked = 0;
+        let mut next = unit_randoms(3);
+        let mut contacts = 0;
         for _ in 0..3000 {
             let (theta, alpha) = (40.0 * next() - 20.0, 40.0 * next() - 20.0);
             let (eps1, eps2) = (0.6 * next() - 0.3, 0.6 * next() - 0.3);
@@ -940,13 +939,13 @@ pub(super) mod tests {
                         c.cap_area_i
                     );
                     assert!((c.normal_gap + depth).abs() < 1e-10);
-                    checked += 1;
+                    contacts += 1;
                 }
                 Overlap::Separate => assert!(depth < 1e-3, "missed a cap {depth} deep"),
                 Overlap::Swallowed => assert!(nodes.iter().all(|&x| height(x) < 0.0)),
             }
         }
-        assert!(checked > 2000, "{checked}");
+        assert!(contacts > 2000, "{contacts}");
     }
 
     #[test]
@@ -1010,6 +1009,23 @@ pub(super) mod tests {
         assert!(c.cap_area_j < PI * r2 * r2);
     }
 
+    /// Uniform numbers in [0, 1) from a seeded stream (the random cases of these tests).
+    fn unit_randoms(seed: u64) -> impl FnMut() -> f64 {
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
+        move || crate::sample::unit_random(&mut rng)
+    }
+
+    /// For each node of `a`, whether it lies strictly inside `b`'s polygon: node by node, the
+    /// exact gauge of its sector.
+    fn nodes_inside(table: &ContourTable, a: &GrainShape, b: &GrainShape) -> Vec<bool> {
+        (0..table.nodes)
+            .map(|k| {
+                let u = b.inv_map * (a.node(table, k) - b.center);
+                table.gauge(u, table.sector(u)) < 1.0
+            })
+            .collect()
+    }
+
     /// Brute force over every node of both contours: the crossing points from the edges whose
     /// ends lie on both sides, the cap polygons node by node.
     fn brute_force(
@@ -1017,15 +1033,7 @@ pub(super) mod tests {
         i: &GrainShape,
         j: &GrainShape,
     ) -> Option<(f64, f64, f64, f64)> {
-        let inside_of = |a: &GrainShape, b: &GrainShape| -> Vec<bool> {
-            (0..table.nodes)
-                .map(|k| {
-                    let u = b.inv_map * (a.node(table, k) - b.center);
-                    table.gauge(u, table.sector(u)) < 1.0
-                })
-                .collect()
-        };
-        let (in_i, in_j) = (inside_of(i, j), inside_of(j, i));
+        let (in_i, in_j) = (nodes_inside(table, i, j), nodes_inside(table, j, i));
         if !in_i.iter().any(|&b| b) && !in_j.iter().any(|&b| b) {
             return None;
         }
@@ -1128,8 +1136,7 @@ pub(super) mod tests {
         // bit.
         let table = ContourTable::new(1.0);
         let n = table.nodes as i32;
-        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
-        let mut next = || crate::sample::unit_random(&mut rng);
+        let mut next = unit_randoms(7);
         let mut compared = 0;
         for _ in 0..300 {
             let (i, j, _) = random_pair(&mut next);
@@ -1186,8 +1193,7 @@ pub(super) mod tests {
         // the line of centres leave no node of either polygon inside the other (node-by-node
         // test); and the cold contact is then Separate, with empty hints.
         let table = ContourTable::new(1.0);
-        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(5);
-        let mut next = || crate::sample::unit_random(&mut rng);
+        let mut next = unit_randoms(5);
         let (mut apart, mut touching) = (0, 0);
         for sample in 0..2000 {
             // Within 1% of where the ellipses touch along the line of centres. Every other pair
@@ -1208,13 +1214,8 @@ pub(super) mod tests {
             let extents =
                 (i.map.transpose() * along).length() + (j.map.transpose() * along).length();
             j.center = along * extents * (0.99 + 0.02 * next());
-            let node_inside = |a: &GrainShape, b: &GrainShape| {
-                (0..table.nodes).any(|k| {
-                    let u = b.inv_map * (a.node(&table, k) - b.center);
-                    table.gauge(u, table.sector(u)) < 1.0
-                })
-            };
-            let separate = !node_inside(&i, &j) && !node_inside(&j, &i);
+            let separate = !nodes_inside(&table, &i, &j).contains(&true)
+                && !nodes_inside(&table, &j, &i).contains(&true);
             if ellipses_apart(&i, &j) {
                 assert!(separate);
                 let mut hint = PairHint::default();
@@ -1239,8 +1240,7 @@ pub(super) mod tests {
         // Expectation: the O(1) cap area and depth and the galloping chain search give what a
         // node-by-node pass over the whole contour gives, for random ellipses in any overlap.
         let table = ContourTable::new(1.0);
-        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(99);
-        let mut next = || crate::sample::unit_random(&mut rng);
+        let mut next = unit_randoms(99);
         let mut checked = 0;
         for _ in 0..400 {
             let (i, j, rj) = random_pair(&mut next);
@@ -1249,19 +1249,11 @@ pub(super) mod tests {
             };
             let (area_i, area_j, depth_i, depth_j) = brute_force(&table, &i, &j).unwrap();
             // The crossing points, from whichever contour has nodes inside the other.
-            let inside_of = |a: &GrainShape, b: &GrainShape| -> Vec<bool> {
-                (0..table.nodes)
-                    .map(|k| {
-                        let u = b.inv_map * (a.node(&table, k) - b.center);
-                        table.gauge(u, table.sector(u)) < 1.0
-                    })
-                    .collect()
-            };
-            let in_i = inside_of(&i, &j);
-            let points = if in_i.iter().any(|&b| b) {
+            let in_i = nodes_inside(&table, &i, &j);
+            let points = if in_i.contains(&true) {
                 brute_crossings(&table, &i, &j, &in_i)
             } else {
-                brute_crossings(&table, &j, &i, &inside_of(&j, &i))
+                brute_crossings(&table, &j, &i, &nodes_inside(&table, &j, &i))
             };
             assert_eq!(points.len(), 2);
             let tangent = c.normal.perp();
