@@ -614,16 +614,20 @@ impl Chord {
 /// their inscribed polygons, and both cold chain searches would find no node inside the other
 /// contour. The test for a pair that was not in contact last step (its hints are empty): pairs
 /// whose bounding circles overlap but whose contours do not touch would otherwise take the
-/// two cold searches every step. The extent of an ellipse `x = c + M u`, `|u| = 1`, along a
-/// unit vector `e` is `|M^T e|`.
+/// two cold searches every step.
+///
+/// The extent of an ellipse `x = c + M u`, `|u| = 1`, along the branch vector `d` is
+/// `|M^T d| / |d|`, so the ellipses lie apart when `|M_i^T d| + |M_j^T d| < |d|^2`. With
+/// `a = |M_i^T d|^2`, `b = |M_j^T d|^2` and `s = |d|^4 - a - b`, that is `s > 0` and
+/// `4 a b < s^2`: no square root and no division.
 #[inline]
 fn ellipses_apart(i: &GrainShape, j: &GrainShape) -> bool {
     let branch = j.center - i.center;
-    let distance = branch.length();
-    let along = branch / distance;
-    let extent_i = (i.map.transpose() * along).length();
-    let extent_j = (j.map.transpose() * along).length();
-    extent_i + extent_j < distance
+    let a = (i.map.transpose() * branch).length_squared();
+    let b = (j.map.transpose() * branch).length_squared();
+    let distance_squared = branch.length_squared();
+    let slack = distance_squared * distance_squared - a - b;
+    slack > 0.0 && 4.0 * a * b < slack * slack
 }
 
 /// Contact between the contour polygons of grains i and j.
