@@ -1,9 +1,11 @@
 //! Contact geometry of two contour polygons, or of a contour polygon and a wall (SPEC §5).
 //!
 //! Both contours are convex, so their boundaries cross at two points P and P'. The arc of grain
-//! i that lies inside grain j is one run of consecutive nodes ("chain"). Its ends are found by
-//! galloping and bisection from last step's ends (or, cold, from a node near the deepest point
-//! of the smooth ellipse): O(log) exact inside tests, whatever the resolution. The two crossing
+//! i that lies inside grain j is one run of consecutive nodes ("chain"). Between two steps its
+//! ends nearly always stay or move by one node, which four to six exact inside tests settle;
+//! otherwise they are found by galloping and bisection from last step's ends (or, cold, from a
+//! node near the deepest point of the smooth ellipse): O(log) exact inside tests, whatever the
+//! resolution. The two crossing
 //! points are cut on j's polygon from i's chain ends, and the j edges they lie on are j's chain
 //! ends, so j's chain needs no search of its own. Cap areas and depths are O(1).
 //!
