@@ -59,6 +59,7 @@ impl ContourTable {
             .chain(&vertex)
             .copied()
             .collect();
+        let apothem = angle::cos(0.5 * dbeta);
         let edges = (0..nodes)
             .map(|k| {
                 let (s, c) = angle::sin_cos((k as f64 + 0.5) * dbeta);
@@ -75,8 +76,8 @@ impl ContourTable {
             vertex,
             vertex_ring,
             edges,
-            apothem: angle::cos(0.5 * dbeta),
-            apothem_squared: angle::cos(0.5 * dbeta).powi(2),
+            apothem,
+            apothem_squared: apothem.powi(2),
             sin_dbeta: angle::sin(dbeta),
         }
     }
@@ -378,7 +379,7 @@ impl GrainShape {
 
     /// Area of the full contour polygon: `N/2 sin(dbeta) det(A R)`.
     pub fn polygon_area(&self, table: &ContourTable) -> f64 {
-        0.5 * table.nodes as f64 * angle::sin(table.dbeta) * self.map.determinant()
+        0.5 * table.nodes as f64 * table.sin_dbeta * self.map.determinant()
     }
 }
 

@@ -91,6 +91,15 @@ impl Chain {
             hi: hi + (lo_wrapped - lo),
         }
     }
+
+    /// The hint for next step's search: the chain's ends wrapped into [0, N).
+    #[inline(always)]
+    fn hint(&self, table: &ContourTable) -> ChainHint {
+        ChainHint {
+            lo: table.wrap(self.lo) as i32,
+            hi: table.wrap(self.hi) as i32,
+        }
+    }
 }
 
 enum ChainSearch {
@@ -196,10 +205,7 @@ fn chain_inside(
 ) -> ChainSearch {
     let n = table.nodes as isize;
     if let Some((chain, borders)) = last_chain_moved(table, a_in_b, hint, n) {
-        *hint = ChainHint {
-            lo: table.wrap(chain.lo) as i32,
-            hi: table.wrap(chain.hi) as i32,
-        };
+        *hint = chain.hint(table);
         return ChainSearch::Found(chain, borders);
     }
     chain_searched(table, a, b, a_in_b, hint)
@@ -243,10 +249,7 @@ fn chain_searched(
         return ChainSearch::Whole;
     };
     let chain = Chain::from_ends(table, lo, hi);
-    *hint = ChainHint {
-        lo: chain.lo as i32,
-        hi: table.wrap(chain.hi) as i32,
-    };
+    *hint = chain.hint(table);
     ChainSearch::Found(chain, ChainBorders::of(table, a_in_b, chain))
 }
 
@@ -698,10 +701,7 @@ pub fn grain_grain_hinted(
                     },
                 })
             };
-            hint.second = chain_j.map_or(ChainHint::NONE, |c| ChainHint {
-                lo: c.lo as i32,
-                hi: table.wrap(c.hi) as i32,
-            });
+            hint.second = chain_j.map_or(ChainHint::NONE, |c| c.hint(table));
             (p_lo, p_hi, chain_j)
         }
         None => {
