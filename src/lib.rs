@@ -25,6 +25,7 @@ pub mod integration;
 pub mod lanes;
 pub mod meshfree;
 pub mod output;
+pub mod portable;
 pub mod run;
 pub mod sample;
 pub mod scenario;

@@ -17,6 +17,7 @@
 
 use super::friction::{TangentialInput, return_map};
 use super::model::{Dense, DiscModel};
+use crate::portable::powf;
 
 /// A rigid, frictionless wall: the line through `point` with unit `normal` pointing to the side
 /// of the grain. Prescribed motion is done by moving `point` between steps.
@@ -283,7 +284,7 @@ pub fn contact_length(model: &DiscModel, u: &[f64], wall: &Wall, state: &WallSta
         let c = step(b);
         let (sa, sb, sc) = (coord(last), coord(b), coord(c));
         let (gb, gc) = (state.gap[b].max(0.0), state.gap[c].max(0.0));
-        let (pb, pc) = (gb.powf(2.0 / 3.0), gc.powf(2.0 / 3.0));
+        let (pb, pc) = (powf(gb, 2.0 / 3.0), powf(gc, 2.0 / 3.0));
         let mut se = if pc > pb {
             sb - pb * (sc - sb) / (pc - pb)
         } else {

@@ -1,5 +1,6 @@
 //! Field nodes of a disc, the integration triangulation and its Gauss points (SPEC §10).
 
+use crate::geometry::angle::{cos, sin};
 use spade::{ConstrainedDelaunayTriangulation, DelaunayTriangulation, Point2, Triangulation};
 
 use super::MeshfreeError;
@@ -71,7 +72,7 @@ impl DiscNodes {
             let offset = if ring % 2 == 0 { 0.0 } else { 0.5 };
             for j in 0..n {
                 let t = 2.0 * std::f64::consts::PI * (j as f64 + offset) / n as f64;
-                positions.push([r * t.cos(), r * t.sin()]);
+                positions.push([r * cos(t), r * sin(t)]);
             }
             ring += 1;
             let step = 0.5 * 3f64.sqrt() * spacing(r - 0.5 * s);

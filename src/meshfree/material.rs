@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop)] // index notation mirrors the tensor formulas
 
 use super::MeshfreeError;
+use crate::portable::ln;
 
 /// Which hyperelastic law a meshfree grain follows.
 #[derive(
@@ -119,7 +120,7 @@ impl Hyperelastic {
                     [c[1][1] / det_c, -c[0][1] / det_c],
                     [-c[1][0] / det_c, c[0][0] / det_c],
                 ];
-                let lnj = j.ln();
+                let lnj = ln(j);
                 energy = 0.5 * mu * (c[0][0] + c[1][1] - 2.0) - mu * lnj + 0.5 * lambda * lnj * lnj;
                 let g = mu - lambda * lnj;
                 for a in 0..2 {

@@ -9,6 +9,8 @@
 //! with the clearance raised by a rigorous bound on how far the true curve bulges past the
 //! chords), after a broad phase on circumscribed circles.
 
+use crate::geometry::angle::sin_cos;
+use crate::portable::hypot;
 use std::f64::consts::TAU;
 
 use rand::SeedableRng;
@@ -188,7 +190,7 @@ pub fn place_grains(
         let mut done = false;
         for _ in 0..MAX_ATTEMPTS_PER_GRAIN {
             let rotation = TAU * unit(&mut rng);
-            let (s, c) = rotation.sin_cos();
+            let (s, c) = sin_cos(rotation);
             let rotated: Vec<[f64; 2]> = outline
                 .iter()
                 .map(|v| [c * v[0] - s * v[1], s * v[0] + c * v[1]])
@@ -209,7 +211,7 @@ pub fn place_grains(
                 .collect();
             let pb = bbox(&polygon);
             let free = placed.iter().all(|q| {
-                let d = (centre[0] - q.centre[0]).hypot(centre[1] - q.centre[1]);
+                let d = hypot(centre[0] - q.centre[0], centre[1] - q.centre[1]);
                 d >= radii[i] + q.radius + gap
                     || polygons_apart(&polygon, &pb, &q.polygon, &q.bbox, gap + excess + q.excess)
             });

@@ -15,6 +15,7 @@
 //! centred at X and scaled by the mean support radius, which spans the same space (so quadratic
 //! fields are reproduced exactly) and keeps the system well conditioned.
 
+use crate::portable::exp;
 use rstar::RTree;
 use rstar::primitives::GeomWithData;
 
@@ -107,7 +108,7 @@ impl Rpim {
         let dj = self.support_radius[j];
         if d <= dj {
             let s = 3.0 * d / dj;
-            (-s * s).exp()
+            exp(-s * s)
         } else {
             0.0
         }

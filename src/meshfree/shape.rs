@@ -6,6 +6,8 @@
 //! describe the grain, what makes "inside" a simple test (`|x| < r(atan2 x)`), and what lets the
 //! interior be filled by scaled copies of the contour ([`place_nodes`]).
 
+use crate::geometry::angle::{atan2, cos, sin, sin_cos};
+use crate::portable::{hypot, powf};
 use std::f64::consts::{PI, TAU};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -149,7 +151,7 @@ fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 }
 
 fn norm(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
+    hypot(a[0], a[1])
 }
 
 /// Signed area (positive when counter-clockwise) of a closed polygon.
@@ -274,7 +276,7 @@ pub(crate) fn polygon_defect(v: &[[f64; 2]]) -> Option<PolygonDefect> {
         if c <= 1e-12 * scale {
             return Some(PolygonDefect::NotStar { i });
         }
-        turn += c.atan2(a[0] * b[0] + a[1] * b[1]);
+        turn += atan2(c, a[0] * b[0] + a[1] * b[1]);
     }
     let turns = turn / TAU;
     if (turns - 1.0).abs() > 1e-9 {
@@ -300,7 +302,7 @@ fn fourier_r(r0: f64, modes: &[FourierMode], theta: f64) -> f64 {
     r0 * (1.0
         + modes
             .iter()
-            .map(|m| m.amplitude * (f64::from(m.n) * theta + m.phase).cos())
+            .map(|m| m.amplitude * cos(f64::from(m.n) * theta + m.phase))
             .sum::<f64>())
 }
 
@@ -309,7 +311,7 @@ fn fourier_derivatives(r0: f64, modes: &[FourierMode], theta: f64) -> [f64; 3] {
     let mut out = [1.0, 0.0, 0.0];
     for m in modes {
         let n = f64::from(m.n);
-        let (s, c) = (n * theta + m.phase).sin_cos();
+        let (s, c) = sin_cos(n * theta + m.phase);
         out[0] += m.amplitude * c;
         out[1] -= m.amplitude * n * s;
         out[2] -= m.amplitude * n * n * c;
@@ -337,7 +339,7 @@ impl StarShape {
             Self::Disc { radius } => *radius,
             Self::Fourier { r0, modes } => fourier_r(*r0, modes, theta),
             Self::Polygon { vertices } => {
-                let d = [theta.cos(), theta.sin()];
+                let d = [cos(theta), sin(theta)];
                 let n = vertices.len();
                 for i in 0..n {
                     let (a, b) = (vertices[i], vertices[(i + 1) % n]);
@@ -531,7 +533,7 @@ impl StarShape {
                     d2
                 } else {
                     let jitter = 1.0 + params.jitter * (2.0 * unit_f64(rng) - 1.0);
-                    d2 * (2.0 / f64::from(n)).powf(params.decay) * jitter
+                    d2 * powf(2.0 / f64::from(n), params.decay) * jitter
                 }
             })
             .collect();
@@ -580,7 +582,7 @@ impl StarShape {
                 for k in 0..m {
                     let [r, r1, r2] = fourier_derivatives(*r0, modes, TAU * k as f64 / m as f64);
                     // Signed curvature of a polar curve.
-                    let kappa = (r * r + 2.0 * r1 * r1 - r * r2) / (r * r + r1 * r1).powf(1.5);
+                    let kappa = (r * r + 2.0 * r1 * r1 - r * r2) / powf(r * r + r1 * r1, 1.5);
                     if kappa < 0.0 {
                         worst = worst.min(-1.0 / kappa);
                     }
@@ -606,7 +608,7 @@ impl StarShape {
                     .collect(),
             },
             Self::Polygon { vertices } => {
-                let (s, c) = angle.sin_cos();
+                let (s, c) = sin_cos(angle);
                 Self::Polygon {
                     vertices: vertices
                         .iter()
@@ -641,7 +643,7 @@ impl StarShape {
                 .map(|k| {
                     let t = TAU * k as f64 / points as f64;
                     let r = self.radius_at(t);
-                    [r * t.cos(), r * t.sin()]
+                    [r * cos(t), r * sin(t)]
                 })
                 .collect(),
         }
@@ -665,7 +667,7 @@ impl StarShape {
     /// Whether `p` (relative to the centre) is inside or on the contour.
     pub fn contains(&self, p: [f64; 2]) -> bool {
         let d = norm(p);
-        d == 0.0 || d <= self.radius_at(p[1].atan2(p[0]))
+        d == 0.0 || d <= self.radius_at(atan2(p[1], p[0]))
     }
 }
 
@@ -1077,7 +1079,7 @@ pub fn place_nodes(
                 .filter(|&i| {
                     let a = sub(vertices[i], vertices[(i + n - 1) % n]);
                     let b = sub(vertices[(i + 1) % n], vertices[i]);
-                    cross(a, b).atan2(a[0] * b[0] + a[1] * b[1]).abs() > CORNER_ANGLE
+                    atan2(cross(a, b), a[0] * b[0] + a[1] * b[1]).abs() > CORNER_ANGLE
                 })
                 .collect();
             (vertices.clone(), corners)
@@ -1088,9 +1090,9 @@ pub fn place_nodes(
     let table = ArcTable::new(contour);
     let perimeter = table.perimeter();
     let project = |p: [f64; 2]| -> [f64; 2] {
-        let t = p[1].atan2(p[0]);
+        let t = atan2(p[1], p[0]);
         let r = shape.radius_at(t);
-        [r * t.cos(), r * t.sin()]
+        [r * cos(t), r * sin(t)]
     };
 
     // Boundary arc positions.

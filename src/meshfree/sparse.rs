@@ -17,6 +17,7 @@
 //! multi-grain matrices below; the thread test uses such a size so that it would catch it).
 //! Parallelism belongs to the caller (e.g. assembling grains concurrently).
 
+use crate::geometry::angle::{cos, sin};
 use std::fmt;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -404,7 +405,7 @@ pub fn synthetic_multi_grain(
         let pts: Vec<[f64; 2]> = (0..nodes)
             .map(|_| {
                 let (r, t) = (u().sqrt(), std::f64::consts::TAU * u());
-                [r * t.cos(), r * t.sin()]
+                [r * cos(t), r * sin(t)]
             })
             .collect();
         // Symmetrized k-nearest-neighbour graph, each edge once (i < j), in a fixed order.

@@ -12,6 +12,7 @@
 //! [`AssemblyState::friction`] (the same return mapping as the implicit scheme, with the slip
 //! of one sub-step, `h` times the half-step velocity relative to the wall).
 
+use crate::geometry::angle::sin;
 use rayon::prelude::*;
 
 use super::{
@@ -66,7 +67,7 @@ fn largest_eigenvalue(model: &GrainModel, node_mass: &[f64]) -> Result<f64, Mesh
     let k = model.initial_stiffness()?;
     let n = k.n;
     let mass = |i: usize| node_mass[i / 2];
-    let mut v: Vec<f64> = (0..n).map(|i| (1.7 * i as f64 + 0.3).sin()).collect();
+    let mut v: Vec<f64> = (0..n).map(|i| sin(1.7 * i as f64 + 0.3)).collect();
     let mut lambda = 0.0;
     for _ in 0..POWER_ITERATIONS {
         let mut w = vec![0.0; n];
