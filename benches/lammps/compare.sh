@@ -8,7 +8,9 @@
 # (to_sdem.py; "model=rigid-lammps-packing"): the same discs and contacts, where the lattice of
 # `sdem bench` has 6 contacts a grain and LAMMPS's packing about 4.15.
 # Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
-# packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/.
+# packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/,
+# unless work/dense_N.data is there already: for 10^6, tile the 10^5 packing instead of
+# compressing one (about an hour): python3 tile.py work/dense_100000.data 5 2 work/dense_1000000.data
 set -eu
 here=$(cd "$(dirname "$0")" && pwd)
 n=$1; lsteps=$2; ssteps=$3; rounds=${4:-3}
@@ -16,9 +18,11 @@ sdem=$(realpath "${5:-$here/../../target/release/sdem}")
 warmup=${WARMUP:-20}
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
-[ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
-[ -f dense_$n.data ] || mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
-  -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
+if [ ! -f dense_$n.data ]; then
+  [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
+  mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
+    -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
+fi
 if [ "${SAME_PACKING:-0}" = 1 ] && [ ! -f sdem_$n/checkpoint.bin ]; then
   python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
   "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
