@@ -1,9 +1,9 @@
 //! Field nodes of a disc, the integration triangulation and its Gauss points (SPEC §10).
 
-use crate::geometry::angle::{cos, sin};
 use spade::{ConstrainedDelaunayTriangulation, DelaunayTriangulation, Point2, Triangulation};
 
 use super::MeshfreeError;
+use crate::geometry::angle::{cos, sin};
 
 /// How densely a disc is filled with field nodes.
 ///

@@ -9,14 +9,14 @@
 //! with the clearance raised by a rigorous bound on how far the true curve bulges past the
 //! chords), after a broad phase on circumscribed circles.
 
-use crate::geometry::angle::sin_cos;
-use crate::portable::hypot;
 use std::f64::consts::TAU;
 
 use rand::SeedableRng;
 
 use super::MeshfreeError;
 use super::shape::{StarShape, point_in_polygon, point_segment_distance, segment_intersection};
+use crate::geometry::angle::sin_cos;
+use crate::portable::hypot;
 
 /// Where a grain was placed: its centre (the origin of its shape) and the rotation applied to
 /// its shape (radians, counter-clockwise; see [`StarShape::rotated`]).

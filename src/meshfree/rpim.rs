@@ -15,11 +15,11 @@
 //! centred at X and scaled by the mean support radius, which spans the same space (so quadratic
 //! fields are reproduced exactly) and keeps the system well conditioned.
 
-use crate::portable::exp;
 use rstar::RTree;
 use rstar::primitives::GeomWithData;
 
 use super::MeshfreeError;
+use crate::portable::exp;
 
 /// Number of other nodes in each support (SPEC §10).
 pub const SUPPORT_NEIGHBOURS: usize = 20;

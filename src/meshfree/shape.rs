@@ -6,8 +6,6 @@
 //! describe the grain, what makes "inside" a simple test (`|x| < r(atan2 x)`), and what lets the
 //! interior be filled by scaled copies of the contour ([`place_nodes`]).
 
-use crate::geometry::angle::{atan2, cos, sin, sin_cos};
-use crate::portable::{hypot, powf};
 use std::f64::consts::{PI, TAU};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -15,6 +13,8 @@ use std::path::Path;
 use super::MeshfreeError;
 use super::discretization::{DiscNodes, NodeDensity};
 use super::rpim::SUPPORT_NEIGHBOURS;
+use crate::geometry::angle::{atan2, cos, sin, sin_cos};
+use crate::portable::{hypot, powf};
 
 /// One term `amplitude cos(n θ + phase)` of a Fourier contour (amplitude relative to `r0`).
 #[derive(Debug, Clone, Copy, PartialEq)]

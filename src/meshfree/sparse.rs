@@ -17,7 +17,6 @@
 //! multi-grain matrices below; the thread test uses such a size so that it would catch it).
 //! Parallelism belongs to the caller (e.g. assembling grains concurrently).
 
-use crate::geometry::angle::{cos, sin};
 use std::fmt;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -27,6 +26,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
 use super::MeshfreeError;
+use crate::geometry::angle::{cos, sin};
 
 /// Collects the nonzeros of a square matrix as (row, col, value) triplets in the caller's
 /// order; duplicates are summed (in triplet order) when the matrix is factorized.

@@ -12,12 +12,12 @@
 //! [`AssemblyState::friction`] (the same return mapping as the implicit scheme, with the slip
 //! of one sub-step, `h` times the half-step velocity relative to the wall).
 
-use crate::geometry::angle::sin;
 use rayon::prelude::*;
 
 use super::{
     Assembly, AssemblyState, ContactMultipliers, Evaluation, FrictionInput, SlipOrigin, StepStats,
 };
+use crate::geometry::angle::sin;
 use crate::meshfree::MeshfreeError;
 use crate::meshfree::model::GrainModel;
 use crate::meshfree::solver::{SolveStats, finite_residual_norm};
