@@ -19,7 +19,7 @@
 //! The same spec and seed give a bitwise-identical `Vec` on every machine: the RNG is
 //! `ChaCha8Rng::seed_from_u64(seed)` (a portable, value-stable stream), uniform variates are built
 //! from the raw `u64` stream, and every transcendental function on the generation path (`ln`,
-//! `exp`, `erfc`) is a portable pure-arithmetic implementation (see `math.rs`) rather than the
+//! `exp`, `erfc`) is a portable pure-arithmetic implementation (`src/portable.rs`) rather than the
 //! platform's C math library.
 //!
 //! # Example
@@ -39,10 +39,11 @@
 //! ```
 
 pub mod file;
-mod math;
 pub mod order;
 mod placement;
 mod radii;
+
+use crate::portable as math;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
