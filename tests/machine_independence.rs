@@ -7,9 +7,9 @@
 //! compares the outputs byte for byte. With glibc's functions it failed: the compaction's
 //! macro.csv differed from its line 40. Where the C library is not glibc, or the processor has
 //! no FMA, the two runs take the same path and the test cannot tell. The meshfree solver takes
-//! its exponentials, logarithms, powers and hypotenuses from `libm` too (`sdem::portable`):
-//! with the platform's, `scenarios/meshfree_bouncing_disc.ron` differed from macro.csv's line 3
-//! this way. (Its sparse factorisations come from faer, which picks its SIMD kernels, FMA
+//! its exponentials, logarithms, powers and hypotenuses from portable code too (`sdem::portable`:
+//! fdlibm ports, and `libm`'s `hypot`): with the platform's, `scenarios/meshfree_bouncing_disc.ron`
+//! differed from macro.csv's line 3 this way. (Its sparse factorisations come from faer, which picks its SIMD kernels, FMA
 //! included, from the processor at run time: a machine without AVX2 and FMA may still round
 //! them differently, which turning glibc's variants off does not show.)
 
