@@ -109,7 +109,7 @@ fn step_dense_packing(bencher: divan::Bencher, grains: usize) {
 fn time_steps(bencher: divan::Bencher, mut world: sdem::integration::World) {
     world.step().unwrap();
     bencher
-        .counter(divan::counter::ItemsCount::new(world.grains.len()))
+        .counter(divan::counter::ItemsCount::new(world.grains().len()))
         .bench_local(|| {
             world.step().unwrap();
         });
@@ -173,7 +173,7 @@ fn step_dense_packing_rigid(bencher: divan::Bencher, grains: usize) {
 fn step_loose_rigid(bencher: divan::Bencher, grains: usize) {
     let mut world = sdem::run::bench::dense_packing(grains, 1.0);
     sdem::run::bench::with_model(&mut world, sdem::grain::ModelLevel::Rigid);
-    for g in &mut world.grains {
+    for g in world.grains_mut() {
         g.center *= 1.15;
     }
     for wall in &mut world.walls {
@@ -189,8 +189,8 @@ fn step_loose_rigid(bencher: divan::Bencher, grains: usize) {
 #[divan::bench(args = [10000, 100000], sample_count = 10)]
 fn neighbor_list_build(bencher: divan::Bencher, grains: usize) {
     let world = sdem::run::bench::dense_packing(grains, 1.0);
-    let centers: Vec<DVec2> = world.grains.iter().map(|g| g.center).collect();
-    let reach: Vec<f64> = world.grains.iter().map(|g| g.radius).collect();
+    let centers: Vec<DVec2> = world.grains().iter().map(|g| g.center).collect();
+    let reach: Vec<f64> = world.grains().iter().map(|g| g.radius).collect();
     let mut list = sdem::geometry::broadphase::NeighborList::new(0.2 * 0.012);
     bencher
         .counter(divan::counter::ItemsCount::new(centers.len()))

@@ -201,15 +201,15 @@ fn stepping_down_holds_the_shape() {
     for _ in 0..200 {
         world.step().unwrap();
         if world.levels()[0].level == ModelLevel::Rigid && at_step_down.is_none() {
-            at_step_down = Some(world.grains[0]);
+            at_step_down = Some(world.grains()[0]);
             // The step that decides integrates at the old level: the full law moved the
             // strains by one step (towards the circle), no jump back to it.
-            let g = world.grains[0];
+            let g = world.grains()[0];
             assert!(g.eps1 - g.eps2 > 0.03, "{g:?}");
         }
     }
     let held = at_step_down.expect("the free grain steps down");
-    let g = world.grains[0];
+    let g = world.grains()[0];
     assert_eq!(
         [g.eps1, g.eps2, g.alpha].map(f64::to_bits),
         [held.eps1, held.eps2, held.alpha].map(f64::to_bits)
@@ -237,7 +237,7 @@ fn stepping_down_holds_the_shape() {
         world.step().unwrap();
         assert_eq!(world.levels()[0].level, ModelLevel::Volumetric);
     }
-    let g = world.grains[0];
+    let g = world.grains()[0];
     assert!(
         0.5 * (g.eps1 + g.eps2) < -1e-3,
         "the mean strain evolved: {g:?}"
@@ -273,7 +273,7 @@ fn adaptive_matches_full_on_a_grain_under_isotropic_load() {
         adaptive.step().unwrap();
     }
     assert_eq!(adaptive.levels()[0].level, ModelLevel::Volumetric);
-    let (a, b) = (full.grains[0], adaptive.grains[0]);
+    let (a, b) = (full.grains()[0], adaptive.grains()[0]);
     let sagitta = 1.0 - (0.5 * full.contours.dbeta()).cos();
     let relative = (a.eps1 - b.eps1).abs() / a.eps1.abs();
     assert!(
@@ -312,7 +312,7 @@ fn rigid_step_is_stable_on_a_dense_packing_of_rigid_grains() {
             0.5 * 0.024,
             ModeSettings::default(),
         ));
-        let mut world = World::new(p, dense.grains.clone(), dense.walls.clone());
+        let mut world = World::new(p, dense.grains().to_vec(), dense.walls.clone());
         for _ in 0..3000 {
             world.step()?;
         }

@@ -106,7 +106,7 @@ fn f64_round_trips_bit_exactly() {
     // The state is stored as bit patterns: NaN payloads survive too.
     let scenario = scenario();
     let world = build_world(&scenario).unwrap();
-    let mut grains = world.grains.clone();
+    let mut grains = world.grains().to_vec();
     let odd = [
         f64::from_bits(0x7ff8_dead_beef_0001),
         -0.0,
@@ -500,7 +500,7 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
         checkpoint_seconds: Some(0.25),
         step: 5,
         time: 0.25,
-        grains: world.grains[..3].to_vec(),
+        grains: world.grains()[..3].to_vec(),
         walls: world.walls.clone(),
         totals: world.totals,
         program: sdem::boundary::loading::LoadingProgram::new(small.loading.clone(), &world.walls),
@@ -513,7 +513,7 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
                 p_c: 1e-5,
             }),
             isotropic_curve: vec![(0.5, 1e-5)],
-            last_good: world.grains[..3].to_vec(),
+            last_good: world.grains()[..3].to_vec(),
             ..Default::default()
         },
         periodic: None,
@@ -655,7 +655,7 @@ fn bench_from_a_checkpoint_steps_the_checkpointed_world() {
     let world = sdem::run::world_from_checkpoint(&saved).unwrap();
     assert_eq!(world.step, saved.step);
     assert_eq!(world.time.to_bits(), saved.time.to_bits());
-    assert_eq!(grain_bits(&world.grains), grain_bits(&saved.grains));
+    assert_eq!(grain_bits(&world.grains()), grain_bits(&saved.grains));
     let wall_points = |walls: &[sdem::boundary::walls::Wall]| -> Vec<[u64; 2]> {
         walls
             .iter()

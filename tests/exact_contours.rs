@@ -47,7 +47,7 @@ fn full_and_volumetric_grains_agree_exactly_under_isotropic_load() {
     let (mut full, mut volumetric) = (make(ModelLevel::Full), make(ModelLevel::Volumetric));
     settle(&mut full, 5000);
     settle(&mut volumetric, 5000);
-    let (a, b) = (full.grains[0], volumetric.grains[0]);
+    let (a, b) = (full.grains()[0], volumetric.grains()[0]);
     assert!(a.eps1 < -1e-3, "{a:?}");
     assert!((a.eps1 - a.eps2).abs() < 1e-12, "{a:?}");
     let relative = (a.eps1 - b.eps1).abs() / b.eps1.abs();
@@ -72,7 +72,7 @@ fn tilted_walls_give_the_level_walls_force() {
         );
         settle(&mut world, 6000);
         let force = world.totals.wall_force[0];
-        let g = world.grains[0];
+        let g = world.grains()[0];
         (force, g.eps1.min(g.eps2), g)
     };
     let (level_force, level_strain, _) = squeeze(0.0);
@@ -113,5 +113,5 @@ fn exact_contours_give_the_same_bits_on_one_and_two_threads() {
         one.totals.contacts
     );
     assert_eq!(one.totals, two.totals);
-    assert_eq!(one.grains, two.grains);
+    assert_eq!(one.grains(), two.grains());
 }

@@ -46,14 +46,14 @@ fn rolling_s(model: &str, mu: f64) -> f64 {
     let theta = std::f64::consts::FRAC_PI_4;
     let downhill = glam::DVec2::new(1.0, -1.0).normalize();
     let g = 10.0;
-    let start = world.grains[0].center;
+    let start = world.grains()[0].center;
     let (mut moment, mut norm) = (0.0, 0.0);
     let end = 0.02;
     while world.time < end {
         world.step().unwrap();
         if world.step % 100 == 0 {
             let t = world.time;
-            let d = (world.grains[0].center - start).dot(downhill);
+            let d = (world.grains()[0].center - start).dot(downhill);
             moment += d * t * t;
             norm += t.powi(4);
         }

@@ -82,11 +82,11 @@ fn a_log_reads_back_exactly_and_is_deterministic() {
         let frame = log.frame(k as i64).unwrap();
         assert_eq!(frame.step, world.step);
         assert_eq!(frame.time, world.time);
-        assert_eq!(frame.grains.len(), world.grains.len());
+        assert_eq!(frame.grains.len(), world.grains().len());
         for ((f, g), s) in frame
             .grains
             .iter()
-            .zip(&world.grains)
+            .zip(world.grains())
             .zip(&world.grain_stress)
         {
             // Bit for bit: the grain channel is f64.
@@ -120,7 +120,7 @@ fn a_log_reads_back_exactly_and_is_deterministic() {
     // The attached scenario is the one that was logged.
     let scenario = Scenario::parse(SMALL, "small.ron").unwrap();
     assert_eq!(log.scenario().unwrap(), Some(scenario));
-    let grains = states[0].0.grains.len().to_string();
+    let grains = states[0].0.grains().len().to_string();
     assert_eq!(log.run_info("grains"), Some(grains.as_str()));
     // Deterministic: the same states give the same bytes.
     let again = dir.join("again.mcap");
@@ -397,7 +397,7 @@ fn frame_of_100k_grains_size_and_write_time() {
         world.step().unwrap();
     }
     let step_seconds = t.elapsed().as_secs_f64() / steps as f64;
-    let grains = world.grains.len() as f64;
+    let grains = world.grains().len() as f64;
     let contacts = active_contacts(&world).len();
     let frames = 3;
     for (label, scene_every) in [("with /scene", Some(1)), ("without /scene", Some(0))] {

@@ -95,7 +95,7 @@ fn the_cell_stress_does_not_depend_on_the_neighbour_list_skin() {
     );
     assert!(thin_world.totals.contacts > 100);
     assert_eq!(thin, thick);
-    assert_eq!(thin_world.grains, thick_world.grains);
+    assert_eq!(thin_world.grains(), thick_world.grains());
 }
 
 /// Expectation: at every step of a compaction, every pair of grains whose bounding circles
@@ -105,13 +105,13 @@ fn the_cell_stress_does_not_depend_on_the_neighbour_list_skin() {
 fn the_neighbour_list_of_a_compressed_cell_misses_no_pair() {
     let scenario = small_periodic(0.5, "Full");
     let mut world = sdem::run::build_world(&scenario).unwrap();
-    let n = world.grains.len();
+    let n = world.grains().len();
     for step in 0..6000 {
         drive_isotropic(&mut world, 5e-2);
         world.step().unwrap_or_else(|e| panic!("step {step}: {e}"));
         let cell = world.cell().unwrap();
         let shapes: Vec<_> = world
-            .grains
+            .grains()
             .iter()
             .map(|g| g.shape_and_velocity_gradient().0)
             .collect();
@@ -176,7 +176,7 @@ fn step_pair(cell: Option<PeriodicCell>, a: DVec2, separation: DVec2) -> (Vec<[f
     world.step().unwrap();
     assert_eq!(world.totals.contacts, 1, "the pair is in contact");
     let changes = world
-        .grains
+        .grains()
         .iter()
         .zip(&before)
         .map(|(g, g0)| {
@@ -277,7 +277,7 @@ fn an_affine_deformation_carries_a_contact_free_gas_exactly() {
     let mut world = gas();
     let reduced = |w: &World| -> Vec<DVec2> {
         let cell = w.cell().unwrap();
-        w.grains.iter().map(|g| cell.reduced(g.center)).collect()
+        w.grains().iter().map(|g| cell.reduced(g.center)).collect()
     };
     let start = reduced(&world);
     for _ in 0..2000 {
@@ -290,7 +290,11 @@ fn an_affine_deformation_carries_a_contact_free_gas_exactly() {
     let p = world.periodic.unwrap();
     assert!(p.shear_strain > 0.19 && p.tilt > 0.15, "{p:?}");
     assert_eq!(world.totals.contacts, 0);
-    for (g, (s, s0)) in world.grains.iter().zip(reduced(&world).iter().zip(&start)) {
+    for (g, (s, s0)) in world
+        .grains()
+        .iter()
+        .zip(reduced(&world).iter().zip(&start))
+    {
         assert!((*s - *s0).length() < 1e-12, "{s:?} vs {s0:?}");
         assert_eq!(g.velocity, DVec2::ZERO);
     }
@@ -302,7 +306,7 @@ fn an_affine_deformation_carries_a_contact_free_gas_exactly() {
 #[test]
 fn a_sheared_gas_stays_on_the_sheared_lattice_through_remaps() {
     let mut world = gas();
-    let start: Vec<DVec2> = world.grains.iter().map(|g| g.center).collect();
+    let start: Vec<DVec2> = world.grains().iter().map(|g| g.center).collect();
     let mut remaps = 0;
     let mut last_tilt = 0.0;
     while world.periodic.unwrap().shear_strain < 1.6 {
@@ -318,7 +322,7 @@ fn a_sheared_gas_stays_on_the_sheared_lattice_through_remaps() {
     assert_eq!(remaps, 2);
     let cell = world.cell().unwrap();
     let gamma = world.periodic.unwrap().shear_strain;
-    for (g, x0) in world.grains.iter().zip(&start) {
+    for (g, x0) in world.grains().iter().zip(&start) {
         let s = cell.reduced(g.center);
         assert!(
             (0.0..1.0).contains(&s.x) && (0.0..1.0).contains(&s.y),
@@ -338,7 +342,7 @@ fn a_sheared_gas_stays_on_the_sheared_lattice_through_remaps() {
 /// stresses `sum_g A_g sigma_g` (xx, yy, xy), with A_g the grain's current area.
 fn grain_stress_sums(world: &World) -> ([f64; 3], [f64; 3]) {
     let (mut external, mut constitutive) = ([0.0; 3], [0.0; 3]);
-    for (g, s) in world.grains.iter().zip(&world.grain_stress) {
+    for (g, s) in world.grains().iter().zip(&world.grain_stress) {
         let area = g.ellipse_area() - s.lost_area;
         for (sum, x) in external.iter_mut().zip(s.external) {
             *sum += area * x;
@@ -400,7 +404,7 @@ fn a_turned_sample_gives_the_turned_stresses() {
     let turn =
         |x: DVec2| DVec2::new(-(x.y - origin.y), x.x - origin.x) + origin + DVec2::new(h, 0.0);
     let turned_grains: Vec<Grain> = world
-        .grains
+        .grains()
         .iter()
         .map(|g| Grain {
             center: turn(g.center),
@@ -431,7 +435,7 @@ fn a_turned_sample_gives_the_turned_stresses() {
     let cell = turned.cell().unwrap();
     let o = original.cell().unwrap().origin;
     let (_, h) = box_size(&original.walls);
-    for (g, u) in original.grains.iter().zip(&turned.grains) {
+    for (g, u) in original.grains().iter().zip(turned.grains()) {
         let expected = DVec2::new(-(g.center.y - o.y), g.center.x - o.x) + o + DVec2::new(h, 0.0);
         let (d, _) = cell.minimum_image(u.center - expected);
         assert!(d.length() < 1e-8, "{:?} vs {expected:?}", u.center);

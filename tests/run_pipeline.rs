@@ -77,14 +77,14 @@ Scenario(
     let scenario = Scenario::parse(&text, "dilute.ron").unwrap();
     let start = sdem::run::build_world(&scenario).unwrap();
     let before: Vec<[f64; 2]> = start
-        .grains
+        .grains()
         .iter()
         .map(|g| [g.center.x, g.center.y])
         .collect();
     // The expectation needs a gas that never collides: no two grains come within touching
     // distance once the box has shrunk by 20%.
-    for (i, a) in start.grains.iter().enumerate() {
-        for b in &start.grains[..i] {
+    for (i, a) in start.grains().iter().enumerate() {
+        for b in &start.grains()[..i] {
             assert!(0.79 * a.center.distance(b.center) > a.radius + b.radius);
         }
     }

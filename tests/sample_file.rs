@@ -87,8 +87,8 @@ fn a_run_starts_from_its_own_grains_csv() {
     // The world starts from the file's grains (12 significant digits), at rest, in the box.
     let world = build_world(&scenario).unwrap();
     let rows = grains_csv(&dir.join("first/grains.csv"));
-    assert_eq!(world.grains.len(), 60);
-    for (g, row) in world.grains.iter().zip(&rows) {
+    assert_eq!(world.grains().len(), 60);
+    for (g, row) in world.grains().iter().zip(&rows) {
         let file = [row[1], row[2], row[3], row[4], row[5], row[6], row[7]];
         let read = [
             g.center.x, g.center.y, g.radius, g.theta, g.eps1, g.eps2, g.alpha,
@@ -264,10 +264,10 @@ fn a_version_1_checkpoint_still_reads() {
     // The grains are those the scenario generates, moved by 40 steps. (The checkpoint numbers
     // them in placement order; a generated sample is now numbered along a Hilbert curve.)
     let start = build_world(&scenario).unwrap();
-    assert_eq!(start.grains.len(), c.grains.len());
+    assert_eq!(start.grains().len(), c.grains.len());
     for b in &c.grains {
         let matches = start
-            .grains
+            .grains()
             .iter()
             .filter(|a| a.radius == b.radius && a.center.distance(b.center) < 0.01)
             .count();

@@ -30,7 +30,7 @@ fn run_for(mut world: World, steps: usize) -> Result<World, Instability> {
 fn dense_packing_at(level: ModelLevel) -> World {
     let mut world = dense_packing(400, 1.0);
     world.params.level = level;
-    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains.len()];
+    let levels = vec![sdem::grain::GrainLevel::new(level); world.grains().len()];
     world.set_levels(&levels);
     world
 }
@@ -84,7 +84,7 @@ fn a_step_just_below_the_critical_estimate_is_stable_on_a_dense_packing() {
     assert!(world.totals.contacts > 1000);
     assert!(
         world
-            .grains
+            .grains()
             .iter()
             .all(|g| g.center.is_finite() && g.eps1.is_finite())
     );
@@ -150,7 +150,7 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
             World::new(params, vec![a, b], Vec::new())
         };
         let energy = |w: &World| {
-            w.grains
+            w.grains()
                 .iter()
                 .map(|g| g.kinetic_energy(1.0, 1.0))
                 .sum::<f64>()
@@ -198,7 +198,7 @@ fn rigid_grains_conserve_energy_to_the_integrators_order() {
         }
         let mut world = World::new(params, grains, box_walls(0.0, 1.0, 0.0, 1.0));
         let energy = |w: &World| {
-            w.grains
+            w.grains()
                 .iter()
                 .map(|g| g.kinetic_energy(1.0, 1.0))
                 .sum::<f64>()
@@ -307,7 +307,7 @@ fn frictional_contacts_are_stable_below_their_critical_estimate_and_stopped_abov
         let world = frictional_dense_run(level, 0.9, 3000)
             .unwrap_or_else(|e| panic!("{level:?} unstable below the estimate: {e}"));
         // Still a dense packing: z = 2C/N above 4.5 (jammed frictionless discs have z = 4).
-        let z = 2.0 * world.totals.contacts as f64 / world.grains.len() as f64;
+        let z = 2.0 * world.totals.contacts as f64 / world.grains().len() as f64;
         assert!(z > 4.5, "{level:?}: z = {z}");
         let err = frictional_dense_run(level, 2.5, 3000).expect_err("unstable at 2.5x");
         assert!(
@@ -353,13 +353,13 @@ fn incompressible_volumetric_grains_take_the_rigid_step_stably_and_are_stopped_a
     let relaxed = dense_run_at_level(ModelLevel::Volumetric, ModelLevel::Rigid, 0.8, 3000)
         .expect("volumetric grains stable at 0.8 of the rigid estimate");
     // The packing stays packed: about 2.3 contacts a grain, as rigid grains keep (measured).
-    assert!(relaxed.totals.contacts > 2 * relaxed.grains.len() as u64);
-    let swollen = relaxed.grains.iter().filter(|g| g.eps1 > 1e-6).count();
+    assert!(relaxed.totals.contacts > 2 * relaxed.grains().len() as u64);
+    let swollen = relaxed.grains().iter().filter(|g| g.eps1 > 1e-6).count();
     assert!(
-        swollen > relaxed.grains.len() / 2,
+        swollen > relaxed.grains().len() / 2,
         "the volume correction swelled only {swollen} grains"
     );
-    assert!(relaxed.grains.iter().all(|g| g.eps1 == g.eps2));
+    assert!(relaxed.grains().iter().all(|g| g.eps1 == g.eps2));
     let err = dense_run_at_level(ModelLevel::Volumetric, ModelLevel::Rigid, 2.0, 3000)
         .expect_err("volumetric grains unstable at twice the rigid estimate");
     assert!(!matches!(err, Instability::NonFinite { .. }), "{err}");

@@ -1,6 +1,7 @@
 //! The grain pass of the step: each grain's pair contacts gathered in pair order, its wall
 //! contacts, stresses and update (SPEC §3–§6, §9), and the sums over a chunk of grains in grain
-//! order.
+//! order. Each grain's frame for the next step is written as soon as the grain is updated,
+//! while its state is still in cache (see [`World::frames_current`](super::World)).
 
 use super::{
     BoxCarry, ChunkSums, Frame, GrainStress, Instability, MAX_WALLS, PairContact, Parameters,
@@ -20,7 +21,6 @@ use glam::{DMat2, DVec2};
 pub(super) struct GrainPass<'a> {
     pub params: &'a Parameters,
     pub contours: &'a Contours,
-    pub frames: &'a [Frame],
     pub neighbors: &'a NeighborList,
     /// The pair pass's flags and records.
     pub pair_active: &'a [bool],
@@ -43,19 +43,23 @@ pub(super) struct GrainPass<'a> {
 }
 
 impl GrainPass<'_> {
-    /// The grains of one chunk, from grain `first` on. Returns the chunk's sums, in grain
-    /// order.
-    pub fn chunk(
-        &self,
-        first: usize,
-        grains: &mut [Grain],
-        stresses: &mut [GrainStress],
-        levels: &mut [GrainLevel],
-        wall_histories: &mut [[f64; MAX_WALLS]],
-    ) -> ChunkSums {
+    /// The grains of one chunk, from grain `first` on. `frames` holds the chunk's frames at
+    /// the start of the step; each is replaced by the frame of its updated grain, and its
+    /// centre and reach (the broad phase's) with it. Returns the chunk's sums, in grain order.
+    pub fn chunk(&self, first: usize, chunk: GrainChunk<'_>) -> ChunkSums {
+        let GrainChunk {
+            grains,
+            stresses,
+            levels,
+            wall_histories,
+            frames,
+            centers,
+            reach,
+        } = chunk;
         let (params, walls, step) = (self.params, self.walls, self.step);
+        let density = params.material.density;
         let mut sums = ChunkSums::default();
-        let near_wall = walls_in_reach(&self.frames[first..first + grains.len()], walls);
+        let near_wall = walls_in_reach(frames, walls);
         // The walls the chunk's grains visit: none unless one is within reach or has springs
         // to drop.
         let chunk_walls = if self.wall_springs || near_wall.iter().any(|&near| near) {
@@ -63,15 +67,15 @@ impl GrainPass<'_> {
         } else {
             &[]
         };
-        for (k, (((grain, stress), level), wall_history)) in grains
+        for (k, ((((grain, stress), level), wall_history), frame)) in grains
             .iter_mut()
             .zip(stresses.iter_mut())
             .zip(levels.iter_mut())
             .zip(wall_histories.iter_mut())
+            .zip(frames.iter_mut())
             .enumerate()
         {
             let g = first + k;
-            let frame = &self.frames[g];
             let mut load = if self.frictional_pairs {
                 self.pair_load::<true>(g, frame)
             } else {
@@ -173,6 +177,9 @@ impl GrainPass<'_> {
             if let Some(carry) = &self.carry {
                 grain.center = carry.apply(grain.center);
             }
+            frame.write(grain, level.level, density);
+            centers[k] = frame.center;
+            reach[k] = frame.bounding_radius;
         }
         sums
     }
@@ -220,6 +227,18 @@ impl GrainPass<'_> {
         }
         load
     }
+}
+
+/// One chunk of the grain pass's per-grain arrays, all of the same grains.
+pub(super) struct GrainChunk<'a> {
+    pub grains: &'a mut [Grain],
+    pub stresses: &'a mut [GrainStress],
+    pub levels: &'a mut [GrainLevel],
+    pub wall_histories: &'a mut [[f64; MAX_WALLS]],
+    pub frames: &'a mut [Frame],
+    /// The broad phase's copies of the frames' centres and bounding radii.
+    pub centers: &'a mut [DVec2],
+    pub reach: &'a mut [f64],
 }
 
 /// For each wall, whether a grain of `frames` (a chunk of the grain pass) may reach it: false

@@ -38,7 +38,7 @@ use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::Real;
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
-use grain_pass::GrainPass;
+use grain_pass::{GrainChunk, GrainPass};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -95,6 +95,17 @@ impl Frame {
             circle: false,
             map: shape.map,
             velocity_gradient,
+        }
+    }
+
+    /// Writes the frame of `grain` at `level`: a circle where the grain is one (see
+    /// [`Frame::circle`]), else its full frame.
+    #[inline]
+    pub fn write(&mut self, grain: &Grain, level: ModelLevel, density: f64) {
+        if level == ModelLevel::Rigid && grain.eps1 == grain.eps2 {
+            self.write_circle(grain, density);
+        } else {
+            *self = Frame::of_grain(grain, density);
         }
     }
 
@@ -376,7 +387,9 @@ pub struct World {
     pub params: Parameters,
     /// The contours the contacts see: polygons, or the exact ellipses (`resolution_deg = 0`).
     pub contours: Contours,
-    pub grains: Vec<Grain>,
+    /// Read through [`World::grains`], changed through [`World::grains_mut`] (which marks the
+    /// frames stale).
+    grains: Vec<Grain>,
     /// The box walls; in a periodic cell, the four virtual walls that drive the cell (see
     /// [`PeriodicBoundary`]), which meet no grain.
     pub walls: Vec<Wall>,
@@ -385,7 +398,14 @@ pub struct World {
     pub time: f64,
     pub step: u64,
     pub neighbors: NeighborList,
-    pub frames: Vec<Frame>,
+    /// Each grain's frame, with the broad phase's copies of its centre and reach in `centers`
+    /// and `reach`.
+    frames: Vec<Frame>,
+    /// Whether `frames`, `centers` and `reach` describe the grains as they are now: the grain
+    /// pass writes each grain's next frame right after its update, so that the next step
+    /// need not read every grain again in a pass of its own (issue #16: that pass was a tenth
+    /// of a 10⁵-grain run). Anything else that changes the grains or their levels clears it.
+    frames_current: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
     /// whether it touched in the last step,
@@ -466,6 +486,7 @@ impl World {
             step: 0,
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
+            frames_current: false,
             pair_state: Vec::new(),
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
@@ -485,6 +506,17 @@ impl World {
         world
     }
 
+    /// The grains.
+    pub fn grains(&self) -> &[Grain] {
+        &self.grains
+    }
+
+    /// The grains, to change between steps (the next step recomputes their frames).
+    pub fn grains_mut(&mut self) -> &mut [Grain] {
+        self.frames_current = false;
+        &mut self.grains
+    }
+
     /// Each grain's model level and the steps it has spent there.
     pub fn levels(&self) -> &[GrainLevel] {
         &self.levels
@@ -494,6 +526,7 @@ impl World {
     pub fn set_levels(&mut self, levels: &[GrainLevel]) {
         assert_eq!(levels.len(), self.grains.len(), "one level per grain");
         self.levels.copy_from_slice(levels);
+        self.frames_current = false;
         self.count_levels();
     }
 
@@ -606,27 +639,26 @@ impl World {
             .resize(self.grains.len(), [0.0; MAX_WALLS]);
         let density = self.params.material.density;
         let n = self.grains.len();
-        self.frames.resize(n, Frame::default());
-        self.centers.resize(n, DVec2::ZERO);
-        self.reach.resize(n, 0.0);
-        // One parallel pass writes the frames and, beside them, the compact centres and reaches
-        // of the broad phase: they were two serial passes over the frames, which the second
-        // thread could not share.
-        self.frames
-            .par_iter_mut()
-            .zip(self.centers.par_iter_mut())
-            .zip(self.reach.par_iter_mut())
-            .zip(self.grains.par_iter().zip(self.levels.par_iter()))
-            .with_min_len(GRAIN_CHUNK)
-            .for_each(|(((frame, center), reach), (g, level))| {
-                if level.level == ModelLevel::Rigid && g.eps1 == g.eps2 {
-                    frame.write_circle(g, density);
-                } else {
-                    *frame = Frame::of_grain(g, density);
-                }
-                *center = frame.center;
-                *reach = frame.bounding_radius;
-            });
+        if !self.frames_current || self.frames.len() != n {
+            self.frames.resize(n, Frame::default());
+            self.centers.resize(n, DVec2::ZERO);
+            self.reach.resize(n, 0.0);
+            // One parallel pass writes the frames and, beside them, the compact centres and
+            // reaches of the broad phase: they were two serial passes over the frames, which
+            // the second thread could not share.
+            self.frames
+                .par_iter_mut()
+                .zip(self.centers.par_iter_mut())
+                .zip(self.reach.par_iter_mut())
+                .zip(self.grains.par_iter().zip(self.levels.par_iter()))
+                .with_min_len(GRAIN_CHUNK)
+                .for_each(|(((frame, center), reach), (g, level))| {
+                    frame.write(g, level.level, density);
+                    *center = frame.center;
+                    *reach = frame.bounding_radius;
+                });
+            self.frames_current = true;
+        }
         let frames_done = Instant::now();
         self.phase_times.frames += (frames_done - start).as_secs_f64();
         let (centers, reach) = (&self.centers, &self.reach);
@@ -762,7 +794,6 @@ impl World {
         let pass = GrainPass {
             params,
             contours: &self.contours,
-            frames: &self.frames,
             neighbors: &self.neighbors,
             pair_active: &self.pair_active,
             pair_contacts: &self.pair_contacts,
@@ -775,23 +806,39 @@ impl World {
             carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
             step: self.step,
         };
+        // The pass overwrites the frames with those of the updated grains: until it is done
+        // they describe neither the old grains nor the new.
+        self.frames_current = false;
         let chunk_sums: Vec<ChunkSums> = self
             .grains
             .par_chunks_mut(GRAIN_CHUNK)
             .zip(self.grain_stress.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.levels.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.wall_history.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.frames.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.centers.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.reach.par_chunks_mut(GRAIN_CHUNK))
             .enumerate()
-            .map(|(chunk, (((grains, stresses), levels), wall_histories))| {
-                pass.chunk(
-                    chunk * GRAIN_CHUNK,
-                    grains,
-                    stresses,
-                    levels,
-                    wall_histories,
-                )
-            })
+            .map(
+                |(
+                    chunk,
+                    ((((((grains, stresses), levels), wall_histories), frames), centers), reach),
+                )| {
+                    let chunk_grains = GrainChunk {
+                        grains,
+                        stresses,
+                        levels,
+                        wall_histories,
+                        frames,
+                        centers,
+                        reach,
+                    };
+                    pass.chunk(chunk * GRAIN_CHUNK, chunk_grains)
+                },
+            )
             .collect();
+        // Every grain was updated and given its next frame, failed steps included.
+        self.frames_current = true;
 
         let mut totals = StepTotals {
             capped_contacts: pair_sums.capped,
@@ -858,6 +905,8 @@ impl World {
     /// back into the cell and keeps the pairs' images (or has the list rebuilt after a remap).
     /// Velocities stay relative to the affine field.
     fn follow_cell(&mut self, motion: &CellMotion) {
+        // The carry and the wrap move the grains after the grain pass wrote their frames.
+        self.frames_current = false;
         self.wraps.resize(self.grains.len(), [0, 0]);
         let wrapped = self
             .grains
@@ -1025,7 +1074,7 @@ mod tests {
             remapped.step().unwrap();
             let to = box_corners(&remapped.walls);
             let map = BoxCarry::new(from, to);
-            for g in &mut remapped.grains {
+            for g in remapped.grains_mut() {
                 g.center = map.apply(g.center);
             }
             remapped.neighbors.follow_affine(from, to);
@@ -1045,6 +1094,94 @@ mod tests {
             still.step().unwrap();
         }
         assert_ne!(state(&still), state(&carried));
+    }
+
+    /// The bits of what a frame holds for its grain: the first line, and the second where the
+    /// grain is not a circle (a circle's second line is stale by design).
+    fn frame_bits(f: &Frame) -> Vec<u64> {
+        let mut v = vec![
+            f.center.x.to_bits(),
+            f.center.y.to_bits(),
+            f.bounding_radius.to_bits(),
+            f.mass.to_bits(),
+            f.velocity.x.to_bits(),
+            f.velocity.y.to_bits(),
+            f.omega.to_bits(),
+            f.circle as u64,
+        ];
+        if !f.circle {
+            v.extend(bits(f.map));
+            v.extend(bits(f.velocity_gradient));
+        }
+        v
+    }
+
+    /// Whether the world's frames, centres and reaches are, bit for bit, those the frames
+    /// pass computes from its grains and levels now.
+    fn frames_match_grains(world: &World) -> Result<(), String> {
+        let density = world.params.material.density;
+        for (g, (grain, level)) in world.grains.iter().zip(&world.levels).enumerate() {
+            let mut expected = Frame::default();
+            expected.write(grain, level.level, density);
+            let frame = &world.frames[g];
+            if frame_bits(frame) != frame_bits(&expected) {
+                return Err(format!("grain {g}: {frame:?} against {expected:?}"));
+            }
+            if world.centers[g] != frame.center || world.reach[g] != frame.bounding_radius {
+                return Err(format!("grain {g}: broad-phase copies differ"));
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn the_grain_pass_leaves_the_frames_the_frames_pass_would_write() {
+        // Expectation: the frame the grain pass writes for each updated grain is, every bit,
+        // the one the frames pass would compute from that grain at the next step (the pass it
+        // spares), for discs, rigid ellipses and deforming grains, with the affine carry and
+        // walls moving; a change made through `grains_mut` or `set_levels` reaches the next
+        // step's frames.
+        use crate::boundary::walls::{LEFT, TOP};
+        let mut world = crate::run::bench::dense_packing(400, 1.0);
+        world.walls[LEFT].velocity = DVec2::X * 1e-3;
+        world.walls[TOP].velocity = DVec2::Y * -2e-3;
+        world.affine_carry = true;
+        for _ in 0..10 {
+            world.step().unwrap();
+        }
+        // Discs, ellipses held rigid after deforming, and deforming grains.
+        for (k, g) in world.grains_mut().iter_mut().enumerate() {
+            if k % 3 == 0 {
+                g.eps2 = g.eps1;
+            }
+        }
+        let levels: Vec<GrainLevel> = (0..world.grains.len())
+            .map(|k| {
+                GrainLevel::new(if k % 3 == 2 {
+                    ModelLevel::Full
+                } else {
+                    ModelLevel::Rigid
+                })
+            })
+            .collect();
+        world.set_levels(&levels);
+        assert!(!world.frames_current);
+        let circles = |w: &World| w.frames.iter().filter(|f| f.circle).count();
+        for _ in 0..20 {
+            world.step().unwrap();
+            assert!(world.frames_current);
+            frames_match_grains(&world).unwrap();
+        }
+        let n = world.grains.len();
+        assert!(circles(&world) > n / 4 && circles(&world) < n / 2);
+        // A change between steps: the next step's frames follow it.
+        world.grains_mut()[5].velocity += DVec2::new(1e-3, 0.0);
+        world.grains_mut()[6].eps2 += 1e-3;
+        assert!(!world.frames_current);
+        world.prepare().unwrap();
+        frames_match_grains(&world).unwrap();
+        world.step().unwrap();
+        frames_match_grains(&world).unwrap();
     }
 
     fn bits(m: DMat2) -> [u64; 4] {

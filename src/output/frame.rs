@@ -93,7 +93,7 @@ impl Frame {
     /// precision), with each grain's model level.
     pub fn of_world(world: &World, measures: Option<Measures>) -> Self {
         let grains = world
-            .grains
+            .grains()
             .iter()
             .zip(&world.grain_stress)
             .map(|(g, s)| FrameGrain {

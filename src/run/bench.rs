@@ -82,7 +82,7 @@ pub fn with_model(world: &mut World, level: ModelLevel) {
     let p = &mut world.params;
     p.level = level;
     p.dt = 0.4 * critical_time_step(&p.material, &p.law, 0.5 * SPACING, level);
-    let levels = vec![GrainLevel::new(level); world.grains.len()];
+    let levels = vec![GrainLevel::new(level); world.grains().len()];
     world.set_levels(&levels);
 }
 
@@ -120,7 +120,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
     let seconds = start.elapsed().as_secs_f64();
     let (width, height) = crate::boundary::walls::box_size(&world.walls);
     Ok(BenchResult {
-        grains: world.grains.len(),
+        grains: world.grains().len(),
         steps,
         seconds,
         contacts: world.totals.contacts,

@@ -279,7 +279,7 @@ pub fn run_scenario(scenario: &Scenario, options: &RunOptions) -> Result<RunSumm
     let macro_path = out.join("macro.csv");
     let writer = sdem_macro_writer(scenario, &macro_path).map_err(io_error(&macro_path))?;
     let program = LoadingProgram::new(scenario.loading.clone(), &world.walls);
-    let last_good = world.grains.clone();
+    let last_good = world.grains().to_vec();
     let sim = Sdem::new(world, scenario, last_good);
     run_loop(
         scenario,

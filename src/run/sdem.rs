@@ -55,16 +55,19 @@ pub struct Sdem {
 impl Sdem {
     /// A run of `scenario` from `world`, whose last good state is `last_good`.
     pub fn new(world: World, scenario: &Scenario, last_good: Vec<Grain>) -> Self {
-        let mean_diameter =
-            2.0 * world.grains.iter().map(|g| g.radius).sum::<f64>() / world.grains.len() as f64;
+        let mean_diameter = 2.0 * world.grains().iter().map(|g| g.radius).sum::<f64>()
+            / world.grains().len() as f64;
         let adaptive = world.params.adaptive.map(|a| AdaptiveStats {
             dt_by_highest_level: a.dt,
             ..Default::default()
         });
-        let conserved_area = scenario
-            .material
-            .is_incompressible()
-            .then(|| world.grains.iter().map(Grain::reference_area).sum::<f64>());
+        let conserved_area = scenario.material.is_incompressible().then(|| {
+            world
+                .grains()
+                .iter()
+                .map(Grain::reference_area)
+                .sum::<f64>()
+        });
         Self {
             world,
             last_good,
@@ -96,7 +99,7 @@ impl Simulation for Sdem {
     }
 
     fn grain_count(&self) -> usize {
-        self.world.grains.len()
+        self.world.grains().len()
     }
 
     fn walls(&self) -> &[Wall] {
@@ -189,7 +192,8 @@ impl Simulation for Sdem {
     }
 
     fn keep_last_good(&mut self) {
-        self.last_good.clone_from(&self.world.grains);
+        self.last_good.clear();
+        self.last_good.extend_from_slice(self.world.grains());
     }
 
     /// The last good grains with the stresses of the current (failed) step, as sdem always
@@ -216,7 +220,7 @@ impl Simulation for Sdem {
             checkpoint_seconds: run.checkpoint_seconds,
             step: world.step,
             time: world.time,
-            grains: world.grains.clone(),
+            grains: world.grains().to_vec(),
             walls: world.walls.clone(),
             totals: world.totals,
             program: run.program.clone(),

@@ -141,7 +141,7 @@ impl TrajectoryWriter {
         // log stays as it was before friction existed, byte for byte.
         let tangential = scenario.friction().is_some();
         let info = RunInfo {
-            grains: world.grains.len(),
+            grains: world.grains().len(),
             material: &p.material,
             model: match &p.adaptive {
                 Some(a) => format!("Adaptive({:?})", a.settings),
