@@ -945,6 +945,22 @@ impl World {
     /// them; and the same without the rattlers of the 3-contact rule
     /// ([`coordination_without_rattlers`]).
     pub fn coordination(&self) -> (f64, f64, f64) {
+        let (z, z_nr) = self.coordination_without_z_nr3();
+        let wall_contacts: Vec<u32> = self.grain_stress.iter().map(|s| s.wall_contacts).collect();
+        let pairs: Vec<(u32, u32)> = self
+            .neighbors
+            .pairs
+            .iter()
+            .zip(&self.pair_active)
+            .filter(|(_, active)| **active)
+            .map(|([i, j], _)| (*i, *j))
+            .collect();
+        let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
+        (z, z_nr, z_nr3)
+    }
+
+    /// `(z, z_nr)` of [`coordination`](Self::coordination), without the rattler removal.
+    pub fn coordination_without_z_nr3(&self) -> (f64, f64) {
         let n = self.grains.len().max(1) as f64;
         let z = 2.0 * self.totals.contacts as f64 / n;
         let carrying = |g: u32| self.grain_stress[g as usize].contacts >= 2;
@@ -961,17 +977,7 @@ impl World {
         } else {
             0.0
         };
-        let wall_contacts: Vec<u32> = self.grain_stress.iter().map(|s| s.wall_contacts).collect();
-        let pairs: Vec<(u32, u32)> = self
-            .neighbors
-            .pairs
-            .iter()
-            .zip(&self.pair_active)
-            .filter(|(_, active)| **active)
-            .map(|([i, j], _)| (*i, *j))
-            .collect();
-        let z_nr3 = coordination_without_rattlers(&wall_contacts, &pairs, 3);
-        (z, z_nr, z_nr3)
+        (z, z_nr)
     }
 }
 

@@ -183,6 +183,10 @@ impl Simulation for Sdem {
         self.world.coordination()
     }
 
+    fn coordination_without_z_nr3(&self) -> (f64, f64) {
+        self.world.coordination_without_z_nr3()
+    }
+
     fn contacts(&self) -> u64 {
         self.world.totals.contacts
     }

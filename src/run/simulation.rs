@@ -124,6 +124,14 @@ pub trait Simulation {
     /// than 2 contacts), and without the rattlers of the 3-contact rule (SPEC §7).
     fn coordination(&self) -> (f64, f64, f64);
 
+    /// `(z, z_nr)` of [`coordination`](Self::coordination), all that a jamming candidate
+    /// records: a loose gas makes candidates every few steps, and `z_nr3`'s rattler removal
+    /// is the dearer part.
+    fn coordination_without_z_nr3(&self) -> (f64, f64) {
+        let (z, z_nr, _) = self.coordination();
+        (z, z_nr)
+    }
+
     /// Active grain–grain contacts (for progress reports).
     fn contacts(&self) -> u64;
 

@@ -280,7 +280,7 @@ impl<'a> Run<'a> {
         let step = sim.step_count();
         match state.candidate {
             None if p_c > self.p_jam => {
-                let (z, z_nr, _) = sim.coordination();
+                let (z, z_nr) = sim.coordination_without_z_nr3();
                 state.candidate = Some(Jamming {
                     step,
                     phi: load.phi,
