@@ -404,7 +404,8 @@ pub struct World {
     /// Whether `frames`, `centers` and `reach` describe the grains as they are now: the grain
     /// pass writes each grain's next frame right after its update, so that the next step
     /// need not read every grain again in a pass of its own (issue #16: that pass was a tenth
-    /// of a 10⁵-grain run). Anything else that changes the grains or their levels clears it.
+    /// of a 10⁵-grain run); a periodic cell's carry and wrap move the frames' centres with the
+    /// grains'. Anything else that changes the grains or their levels clears it.
     frames_current: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
@@ -905,17 +906,24 @@ impl World {
     /// back into the cell and keeps the pairs' images (or has the list rebuilt after a remap).
     /// Velocities stay relative to the affine field.
     fn follow_cell(&mut self, motion: &CellMotion) {
-        // The carry and the wrap move the grains after the grain pass wrote their frames.
-        self.frames_current = false;
         self.wraps.resize(self.grains.len(), [0, 0]);
+        // The carry and the wrap move only the centres (velocities stay relative to the
+        // affine field): a frame written by the grain pass stays current once its centre and
+        // the broad phase's copy follow (a frame's centre is its grain's).
+        let frames_current = self.frames_current;
         let wrapped = self
             .grains
             .par_iter_mut()
             .zip(self.wraps.par_iter_mut())
+            .zip(self.frames.par_iter_mut().zip(self.centers.par_iter_mut()))
             .with_min_len(GRAIN_CHUNK)
-            .map(|(g, wrap)| {
+            .map(|((g, wrap), (frame, frame_center))| {
                 let (center, image) = motion.current.wrap(motion.carry(g.center));
                 g.center = center;
+                if frames_current {
+                    frame.center = center;
+                    *frame_center = center;
+                }
                 *wrap = image;
                 image != [0, 0]
             })
@@ -1188,6 +1196,48 @@ mod tests {
         frames_match_grains(&world).unwrap();
         world.step().unwrap();
         frames_match_grains(&world).unwrap();
+    }
+
+    #[test]
+    fn a_periodic_cell_keeps_the_frames_current_through_its_carry_and_wraps() {
+        // Expectation: the cell's affine carry and the wrap of grains that leave it move only
+        // centres, so the frames the grain pass wrote stay, bit for bit, those the frames pass
+        // would compute, while the cell compresses and shears and grains cross its sides.
+        let base = crate::run::bench::dense_packing(100, 1.0);
+        let (lo, hi) = box_corners(&base.walls);
+        let spacing = (hi - lo) / 10.0;
+        let steps = 200;
+        let speed = spacing.x / (steps as f64 * base.params.dt);
+        let grains = (0..100)
+            .map(|k| {
+                let cell = DVec2::new((k % 10) as f64 + 0.5, (k / 10) as f64 + 0.5);
+                let mut g = Grain::at_rest(lo + cell * spacing, 0.3 * spacing.min_element());
+                g.velocity = DVec2::new(-1.0, -0.6 + 0.01 * k as f64) * speed;
+                g.omega = 0.1 * k as f64;
+                g
+            })
+            .collect();
+        let mut world = World::new(base.params.clone(), grains, base.walls.clone())
+            .with_periodic(PeriodicBoundary::default());
+        let start = world.grains.clone();
+        for step in 0..steps {
+            let (w, h) = crate::boundary::walls::box_size(&world.walls);
+            world.walls[crate::boundary::walls::RIGHT].velocity.x = -1e-3 * w;
+            world.walls[crate::boundary::walls::TOP].velocity.y = 1e-3 * h;
+            world.periodic.as_mut().unwrap().shear_rate = 1e-3;
+            world.step().unwrap();
+            assert!(world.frames_current);
+            frames_match_grains(&world)
+                .map_err(|e| format!("step {step}: {e}"))
+                .unwrap();
+        }
+        // Grains did cross the cell's sides (a wrap moves a centre by a cell width).
+        let wrapped = start
+            .iter()
+            .zip(&world.grains)
+            .filter(|(a, b)| (a.center.x - b.center.x).abs() > 2.0 * spacing.x)
+            .count();
+        assert!(wrapped >= 10, "{wrapped} grains wrapped");
     }
 
     fn bits(m: DMat2) -> [u64; 4] {
