@@ -47,19 +47,10 @@ impl GrainPass<'_> {
     /// the start of the step; each is replaced by the frame of its updated grain, and its
     /// centre and reach (the broad phase's) with it. Returns the chunk's sums, in grain order.
     pub fn chunk(&self, first: usize, chunk: GrainChunk<'_>) -> ChunkSums {
-        let GrainChunk {
-            grains,
-            stresses,
-            levels,
-            wall_histories,
-            frames,
-            centers,
-            reach,
-        } = chunk;
         let (params, walls, step) = (self.params, self.walls, self.step);
         let density = params.material.density;
         let mut sums = ChunkSums::default();
-        let near_wall = walls_in_reach(frames, walls);
+        let near_wall = walls_in_reach(chunk.frames, walls);
         // The walls the chunk's grains visit: none unless one is within reach or has springs
         // to drop.
         let chunk_walls = if self.wall_springs || near_wall.iter().any(|&near| near) {
@@ -67,12 +58,13 @@ impl GrainPass<'_> {
         } else {
             &[]
         };
-        for (k, ((((grain, stress), level), wall_history), frame)) in grains
+        for (k, ((((grain, stress), level), wall_history), frame)) in chunk
+            .grains
             .iter_mut()
-            .zip(stresses.iter_mut())
-            .zip(levels.iter_mut())
-            .zip(wall_histories.iter_mut())
-            .zip(frames.iter_mut())
+            .zip(chunk.stresses.iter_mut())
+            .zip(chunk.levels.iter_mut())
+            .zip(chunk.wall_histories.iter_mut())
+            .zip(chunk.frames.iter_mut())
             .enumerate()
         {
             let g = first + k;
@@ -178,8 +170,8 @@ impl GrainPass<'_> {
                 grain.center = carry.apply(grain.center);
             }
             frame.write(grain, level.level, density);
-            centers[k] = frame.center;
-            reach[k] = frame.bounding_radius;
+            chunk.centers[k] = frame.center;
+            chunk.reach[k] = frame.bounding_radius;
         }
         sums
     }
