@@ -655,7 +655,7 @@ fn bench_from_a_checkpoint_steps_the_checkpointed_world() {
     let world = sdem::run::world_from_checkpoint(&saved).unwrap();
     assert_eq!(world.step, saved.step);
     assert_eq!(world.time.to_bits(), saved.time.to_bits());
-    assert_eq!(grain_bits(&world.grains()), grain_bits(&saved.grains));
+    assert_eq!(grain_bits(world.grains()), grain_bits(&saved.grains));
     let wall_points = |walls: &[sdem::boundary::walls::Wall]| -> Vec<[u64; 2]> {
         walls
             .iter()

@@ -1217,7 +1217,7 @@ mod tests {
                 g
             })
             .collect();
-        let mut world = World::new(base.params.clone(), grains, base.walls.clone())
+        let mut world = World::new(base.params, grains, base.walls.clone())
             .with_periodic(PeriodicBoundary::default());
         let start = world.grains.clone();
         for step in 0..steps {

@@ -143,7 +143,7 @@ fn header(extra: &[&str]) -> String {
 
 /// One line per grain: its six DoF, radius, Love–Weber stress (tension positive) and contacts.
 pub fn write_grains_csv(path: &Path, world: &World) -> std::io::Result<()> {
-    write_grain_rows(path, &world.grains(), &world.grain_stress)
+    write_grain_rows(path, world.grains(), &world.grain_stress)
 }
 
 /// [`write_grains_csv`] of given grains and stresses (one row per pair: the shorter list

@@ -37,7 +37,7 @@ pub(super) fn length_decimals(min_radius: f64) -> usize {
 /// by mean stress) and one of lines (the box).
 pub(super) fn encode_scene(out: &mut String, world: &World, log_time: u64) {
     out.clear();
-    let grains = &world.grains();
+    let grains = world.grains();
     let n = grains.len().max(1);
     let mean_radius = grains.iter().map(|g| g.radius).sum::<f64>() / n as f64;
     let min_radius = grains

@@ -172,7 +172,7 @@ pub(crate) use scene_schema;
 pub const SCENE_SCHEMA: &str = scene_schema!(": cylinders and lines", "", r#"{"type": "array"}"#);
 
 pub(super) fn encode_grains(buf: &mut Vec<u8>, world: &World) {
-    let g = &world.grains();
+    let g = world.grains();
     let s = &world.grain_stress;
     let n = g.len();
     let mut w = CdrWriter::new(buf);
