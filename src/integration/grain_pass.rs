@@ -43,7 +43,7 @@ pub(super) struct GrainPass<'a> {
 }
 
 impl GrainPass<'_> {
-    /// The grains of one chunk, from grain `first` on. `frames` holds the chunk's frames at
+    /// The grains of one chunk, from grain `first` on. `chunk.frames` holds their frames at
     /// the start of the step; each is replaced by the frame of its updated grain, and its
     /// centre and reach (the broad phase's) with it. Returns the chunk's sums, in grain order.
     pub fn chunk(&self, first: usize, chunk: GrainChunk<'_>) -> ChunkSums {
