@@ -405,7 +405,8 @@ pub struct World {
     /// pass writes each grain's next frame right after its update, so that the next step
     /// need not read every grain again in a pass of its own (issue #16: that pass was a tenth
     /// of a 10⁵-grain run); a periodic cell's carry and wrap move the frames' centres with the
-    /// grains'. Anything else that changes the grains or their levels clears it.
+    /// grains'. Anything else that changes the grains or their levels clears it (the density,
+    /// the one parameter a frame reads, is fixed for the world's life).
     frames_current: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
@@ -807,9 +808,6 @@ impl World {
             carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
             step: self.step,
         };
-        // The pass overwrites the frames with those of the updated grains: until it is done
-        // they describe neither the old grains nor the new.
-        self.frames_current = false;
         let chunk_sums: Vec<ChunkSums> = self
             .grains
             .par_chunks_mut(GRAIN_CHUNK)
@@ -838,7 +836,8 @@ impl World {
                 },
             )
             .collect();
-        // Every grain was updated and given its next frame, failed steps included.
+        // Every grain was updated and given its next frame, failed steps included (a grain's
+        // failure is reported after the pass).
         self.frames_current = true;
 
         let mut totals = StepTotals {
@@ -911,6 +910,8 @@ impl World {
         // affine field): a frame written by the grain pass stays current once its centre and
         // the broad phase's copy follow (a frame's centre is its grain's).
         let frames_current = self.frames_current;
+        // The zip below must not drop a grain: the step's `prepare` sized the frames.
+        debug_assert_eq!(self.frames.len(), self.grains.len());
         let wrapped = self
             .grains
             .par_iter_mut()
