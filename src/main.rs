@@ -403,6 +403,13 @@ fn run(cli: Cli) -> Result<()> {
                         a.dt[0], a.dt[2]
                     );
                 }
+                if a.multi_rate {
+                    eprintln!(
+                        "sdem: multi-rate cycles: while some grains deform and a quarter or more are rigid, the rigid grains out of their reach take one step of {:.3e} to their two of {:.3e}",
+                        2.0 * a.dt[2],
+                        a.dt[2]
+                    );
+                }
             }
             // On a terminal: a progress bar (after a few seconds); otherwise a line every 30 s.
             let terminal = std::io::stderr().is_terminal();

@@ -68,11 +68,24 @@ impl NeighborList {
     /// periodic cell. In an affine compression the grains then keep one list for hundreds of
     /// steps instead of rebuilding it whenever the box has moved half a skin.
     pub fn needs_rebuild(&self, centers: &[DVec2], reach: &[f64]) -> bool {
+        self.needs_rebuild_with_reserve(centers, reach, 0.0)
+    }
+
+    /// [`needs_rebuild`](Self::needs_rebuild), keeping `reserve` of every grain's budget for
+    /// motion to come before the next check (the second half of a multi-rate cycle): once it
+    /// answers false, every pair whose bounding circles are less than `2 reserve` apart is
+    /// listed.
+    pub fn needs_rebuild_with_reserve(
+        &self,
+        centers: &[DVec2],
+        reach: &[f64],
+        reserve: f64,
+    ) -> bool {
         if self.reference_centers.len() != centers.len() || self.reference_matrix.is_some() {
             return true;
         }
         let contraction = (1.0 - self.affine_scale.min_element()).max(0.0);
-        let budget = self.displacement_budget(contraction, reach);
+        let budget = self.displacement_budget(contraction, reach) - reserve;
         if budget <= 0.0 {
             return true;
         }

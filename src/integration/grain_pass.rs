@@ -37,9 +37,71 @@ pub(super) struct GrainPass<'a> {
     /// Whether a wall has friction: then it drops the springs of the grains it no longer
     /// touches, and every chunk visits it.
     pub wall_springs: bool,
-    /// An affine phase's carry of the grain centres over the step.
+    /// An affine phase's carry of the grain centres over the step (over the half, in a
+    /// multi-rate cycle).
     pub carry: Option<BoxCarry>,
     pub step: u64,
+    /// The time step of a plain step; in a multi-rate cycle, that of the grains that take two.
+    pub dt: f64,
+    /// The half of a multi-rate cycle this pass runs; `None` for a plain step.
+    pub cycle: Option<CycleHalf<'a>>,
+}
+
+/// One half of a multi-rate cycle (see [`World::step`](super::World::step)).
+#[derive(Clone, Copy)]
+pub(super) struct CycleHalf<'a> {
+    /// Whether each grain takes two steps of the cycle (fast) or one of twice the length in the
+    /// first half (slow).
+    pub fast: &'a [bool],
+    pub second: bool,
+}
+
+/// What a grain does in a pass.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Turn {
+    Plain,
+    /// The first of a fast grain's two steps: its sums are counted after the second, but for
+    /// half its wall forces (the wall force of a cycle is its mean).
+    FastFirst,
+    /// A slow grain's step of twice the length, in the first half.
+    SlowFirst,
+    FastSecond,
+    /// The second half: a slow grain only follows the box.
+    SlowSecond,
+}
+
+impl Turn {
+    /// The time step the grain takes, given the pass's step.
+    #[inline]
+    fn dt(self, dt: f64) -> f64 {
+        if self == Turn::SlowFirst {
+            2.0 * dt
+        } else {
+            dt
+        }
+    }
+
+    /// The weight of the grain's wall forces in the step's (or cycle's) totals.
+    #[inline]
+    fn wall_weight(self) -> f64 {
+        match self {
+            Turn::FastFirst | Turn::FastSecond => 0.5,
+            _ => 1.0,
+        }
+    }
+
+    /// Whether the grain's sums other than wall forces are counted in this pass.
+    #[inline]
+    fn tallied(self) -> bool {
+        self != Turn::FastFirst
+    }
+
+    /// Steps the adaptive level's counters advance by (a slow grain's step of a cycle counts
+    /// as the two steps of the grains beside it).
+    #[inline]
+    fn level_steps(self) -> u32 {
+        if self == Turn::SlowFirst { 2 } else { 1 }
+    }
 }
 
 impl GrainPass<'_> {
@@ -68,6 +130,26 @@ impl GrainPass<'_> {
             .enumerate()
         {
             let g = first + k;
+            let turn = match &self.cycle {
+                None => Turn::Plain,
+                Some(c) => match (c.fast[g], c.second) {
+                    (true, false) => Turn::FastFirst,
+                    (false, false) => Turn::SlowFirst,
+                    (true, true) => Turn::FastSecond,
+                    (false, true) => Turn::SlowSecond,
+                },
+            };
+            if turn == Turn::SlowSecond {
+                if let Some(carry) = &self.carry {
+                    grain.center = carry.apply(grain.center);
+                }
+                frame.write(grain, level.level, density);
+                chunk.centers[k] = frame.center;
+                chunk.reach[k] = frame.bounding_radius;
+                continue;
+            }
+            let dt = turn.dt(self.dt);
+            let tallied = turn.tallied();
             let mut load = if self.frictional_pairs {
                 self.pair_load::<true>(g, frame)
             } else {
@@ -134,7 +216,7 @@ impl GrainPass<'_> {
                                     relative_velocity.dot(c.normal.perp()),
                                     friction.walls[w],
                                     frame.mass,
-                                    params.dt,
+                                    dt,
                                 );
                                 wall_history[w] = t.history;
                                 force += t.force * c.normal.perp();
@@ -143,29 +225,35 @@ impl GrainPass<'_> {
                             }
                             load.add(force, c.point - frame.center, c.cap_area_i);
                             load.wall_contacts += 1;
-                            sums.totals.wall_force[w] += normal_force.dot(wall.normal);
-                            sums.totals.capped_contacts += response.capped as u64;
+                            sums.totals.wall_force[w] +=
+                                turn.wall_weight() * normal_force.dot(wall.normal);
+                            if tallied {
+                                sums.totals.capped_contacts += response.capped as u64;
+                            }
                         }
                     },
                 }
             }
-            let update = advance_grain(params, grain, level, &load, g, step);
-            sums.totals.level_counts[level.level.index()] += 1;
+            let update =
+                advance_grain(params, dt, turn.level_steps(), grain, level, &load, g, step);
             *stress = update.stress;
             if let Err(e) = update.result {
                 sums.failure.get_or_insert(e);
             }
-            sums.totals.grain_area += update.area;
-            sums.totals.kinetic_energy += update.kinetic_energy;
-            if self.cell.is_some() {
-                let m = grain.mass(params.material.density);
-                let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
-                for (sum, x) in sums.momentum_flux.iter_mut().zip(flux) {
-                    *sum += x;
+            if tallied {
+                sums.totals.level_counts[level.level.index()] += 1;
+                sums.totals.grain_area += update.area;
+                sums.totals.kinetic_energy += update.kinetic_energy;
+                if self.cell.is_some() {
+                    let m = grain.mass(params.material.density);
+                    let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
+                    for (sum, x) in sums.momentum_flux.iter_mut().zip(flux) {
+                        *sum += x;
+                    }
                 }
+                sums.totals.elastic_energy += update.elastic_energy;
+                sums.contact_ends += load.contacts as u64;
             }
-            sums.totals.elastic_energy += update.elastic_energy;
-            sums.contact_ends += load.contacts as u64;
             if let Some(carry) = &self.carry {
                 grain.center = carry.apply(grain.center);
             }
@@ -303,9 +391,13 @@ struct GrainUpdate {
     kinetic_energy: f64,
 }
 
-/// Stresses, accelerations and the symplectic Euler update of one grain (SPEC §3–§6).
+/// Stresses, accelerations and the symplectic Euler update of one grain over `dt` (SPEC
+/// §3–§6); the adaptive level's counters advance by `level_steps` steps under the same stress.
+#[allow(clippy::too_many_arguments)]
 fn advance_grain(
     params: &Parameters,
+    dt: f64,
+    level_steps: u32,
     grain: &mut Grain,
     level: &mut GrainLevel,
     load: &ContactLoad,
@@ -314,7 +406,6 @@ fn advance_grain(
 ) -> GrainUpdate {
     let material = &params.material;
     let density = material.density;
-    let dt = params.dt;
     let reference_area = grain.reference_area();
     let lost_fraction = load.lost_area / reference_area;
     let current_area = grain.ellipse_area() - load.lost_area;
@@ -410,13 +501,15 @@ fn advance_grain(
     if let Some(adaptive) = &params.adaptive {
         let (mean, deviator) = stress_invariants(stress.external);
         let inv_young = 1.0 / material.young;
-        let next = adaptive
-            .settings
-            .next_level(*level, mean * inv_young, deviator * inv_young);
-        if next.level < level.level {
-            freeze(grain, next.level);
+        for _ in 0..level_steps {
+            let next = adaptive
+                .settings
+                .next_level(*level, mean * inv_young, deviator * inv_young);
+            if next.level < level.level {
+                freeze(grain, next.level);
+            }
+            *level = next;
         }
-        *level = next;
     }
 
     let result = check_grain(grain, material.young / density, index, step);

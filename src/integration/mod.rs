@@ -38,7 +38,8 @@ use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::Real;
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
-use grain_pass::{GrainChunk, GrainPass};
+use grain_pass::{CycleHalf, GrainChunk, GrainPass};
+use parameters::MULTI_RATE_MIN_RIGID_SHARE;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -353,6 +354,15 @@ struct PairSums {
     failure: Option<Instability>,
 }
 
+/// What a grain pass returns besides the step's totals.
+#[derive(Debug, Default)]
+struct PassEnds {
+    /// `sum m v ⊗ v` (xx, yy, xy).
+    momentum_flux: [f64; 3],
+    /// Grain–grain contact ends (each contact counted by both grains).
+    contact_ends: u64,
+}
+
 #[derive(Debug, Clone, Copy, Default)]
 struct ChunkSums {
     totals: StepTotals,
@@ -437,6 +447,11 @@ pub struct World {
     /// inside the grain pass. Set by the run loop before each step; not in a periodic cell,
     /// whose grains follow the cell anyway.
     pub affine_carry: bool,
+    /// The substep of the coming multi-rate cycle, if the next step is one (see
+    /// [`World::step`]); set with the adaptive time step.
+    cycle_substep: Option<f64>,
+    /// Per-cycle scratch: whether each grain takes the two substeps of the cycle.
+    fast: Vec<bool>,
 }
 
 /// The homogeneous deformation that maps the box with corners `from_lo`, `from_hi` (lower left,
@@ -503,6 +518,8 @@ impl World {
             wall_history: vec![[0.0; MAX_WALLS]; n],
             phase_times: PhaseTimes::default(),
             affine_carry: false,
+            cycle_substep: None,
+            fast: Vec::new(),
         };
         world.count_levels();
         world
@@ -542,13 +559,42 @@ impl World {
         self.apply_adaptive_dt();
     }
 
-    /// The adaptive time step: that of the highest level any grain is at.
+    /// The adaptive time step: that of the highest level any grain is at; with multi-rate
+    /// cycles, twice that while at least [`MULTI_RATE_MIN_RIGID_SHARE`] of the grains are
+    /// rigid and the rigid level's own step allows it (the next step is then a cycle).
     fn apply_adaptive_dt(&mut self) {
+        self.cycle_substep = None;
         if let Some(adaptive) = &self.params.adaptive {
             let counts = &self.totals.level_counts;
             let highest = (0..3).rev().find(|&k| counts[k] > 0).unwrap_or(0);
-            self.params.dt = adaptive.dt[highest];
+            let step = adaptive.dt[highest];
+            let grains: u64 = counts.iter().sum();
+            let cycle = adaptive.multi_rate
+                && highest > 0
+                && adaptive.dt[0] >= 2.0 * step
+                && counts[0] as f64 >= MULTI_RATE_MIN_RIGID_SHARE * grains as f64
+                // Frictionless grains in a box (the scenario refuses the rest).
+                && self.periodic.is_none()
+                && self.params.friction.is_none();
+            if cycle {
+                self.cycle_substep = Some(step);
+                self.params.dt = 2.0 * step;
+            } else {
+                self.params.dt = step;
+            }
         }
+    }
+
+    /// The substep of the next step if it is a multi-rate cycle ([`World::step`]); its
+    /// `params.dt` is then twice that.
+    pub fn cycle_substep(&self) -> Option<f64> {
+        self.cycle_substep
+    }
+
+    /// Whether each grain took the two substeps of the last multi-rate cycle (empty before the
+    /// first cycle).
+    pub fn cycle_roles(&self) -> &[bool] {
+        &self.fast
     }
 
     /// The periodic cell now, if the world has one.
@@ -634,7 +680,10 @@ impl World {
     }
 
     /// Recomputes shapes, velocity fields and the neighbour list for the current state.
-    fn prepare(&mut self) -> Result<(), Instability> {
+    /// Frames (when stale) and the neighbour list, checked with `reserve` of every grain's
+    /// budget kept for motion before the next check (see
+    /// [`NeighborList::needs_rebuild_with_reserve`]).
+    fn prepare(&mut self, reserve: f64) -> Result<(), Instability> {
         let start = Instant::now();
         // A grain added after construction gets an empty row of wall history.
         self.wall_history
@@ -679,7 +728,9 @@ impl World {
         }
         let rebuild = match &cell {
             Some(cell) => self.neighbors.needs_rebuild_periodic(centers, reach, cell),
-            None => self.neighbors.needs_rebuild(centers, reach),
+            None => self
+                .neighbors
+                .needs_rebuild_with_reserve(centers, reach, reserve),
         };
         if rebuild {
             let old_pairs = std::mem::take(&mut self.neighbors.pairs);
@@ -733,7 +784,9 @@ impl World {
     }
 
     /// Contact geometry and forces of every candidate pair, and their sums.
-    fn compute_pair_contacts(&mut self) -> Result<PairSums, Instability> {
+    /// `only_fast`: the second half of a multi-rate cycle, which computes only the pairs of two
+    /// fast grains.
+    fn compute_pair_contacts(&mut self, only_fast: bool) -> Result<PairSums, Instability> {
         let pass = pairs::PairPass {
             params: &self.params,
             contours: &self.contours,
@@ -744,6 +797,7 @@ impl World {
             periodic: self
                 .periodic
                 .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
+            only_fast: only_fast.then_some(self.fast.as_slice()),
         };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,
@@ -772,14 +826,197 @@ impl World {
         Ok(totals)
     }
 
-    /// Advances the world by one time step.
+    /// Advances the world by one time step: a plain step of `params.dt`, or a multi-rate cycle.
+    ///
+    /// A cycle ([`Adaptive::multi_rate`](parameters::Adaptive::multi_rate)) lasts `params.dt`
+    /// = 2 h, h the deforming levels' step. The grains that deform, and the rigid grains whose
+    /// bounding circles come within reach of one of theirs over the cycle (fast grains), take
+    /// two steps of h; the other rigid grains (slow) take one step of 2 h, in the first half,
+    /// with the forces at the cycle's start. The second half recomputes only the pairs of two
+    /// fast grains: a fast grain meets its slow neighbours with the first half's force in
+    /// both halves, so each pair's impulse over the cycle is the same on both sides. The walls
+    /// and the affine carry move by h in each half, so that every grain follows the box as in
+    /// plain steps. The cycle's wall forces are the mean over its halves.
     pub fn step(&mut self) -> Result<&StepTotals, Instability> {
-        self.prepare()?;
+        match self.cycle_substep {
+            Some(substep) => self.step_cycle(substep)?,
+            None => self.step_plain()?,
+        }
+        // The next step's time step, from the levels the grains chose (a fixed-order sum).
+        let start = Instant::now();
+        self.apply_adaptive_dt();
+        self.phase_times.grains += start.elapsed().as_secs_f64();
+        Ok(&self.totals)
+    }
+
+    fn step_plain(&mut self) -> Result<(), Instability> {
+        self.prepare(0.0)?;
         let pairs_start = Instant::now();
-        let pair_sums = self.compute_pair_contacts()?;
+        let pair_sums = self.compute_pair_contacts(false)?;
         let grains_start = Instant::now();
         self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
 
+        let dt = self.params.dt;
+        let carried_box = self.carried_box(dt);
+        let mut totals = StepTotals {
+            capped_contacts: pair_sums.capped,
+            friction_dissipation: pair_sums.dissipation,
+            sliding_contacts: pair_sums.sliding,
+            ..Default::default()
+        };
+        let ends = self.grain_pass(dt, None, carried_box, &mut totals)?;
+        totals.contacts = ends.contact_ends / 2;
+        match self.periodic.as_mut() {
+            Some(periodic) => {
+                let area_before = periodic.cell(&self.walls).area();
+                let motion = periodic.advance(&mut self.walls, dt);
+                let area = motion.current.area();
+                totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
+                totals.kinetic_stress = ends.momentum_flux.map(|m| -m / area);
+                self.follow_cell(&motion);
+            }
+            None => self.move_walls(dt, carried_box),
+        }
+        self.time += dt;
+        self.step += 1;
+        if self.params.friction.is_some() {
+            self.friction_work += totals.friction_dissipation;
+        }
+        self.totals = totals;
+        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// A multi-rate cycle of two substeps `substep` (see [`World::step`]).
+    fn step_cycle(&mut self, substep: f64) -> Result<(), Instability> {
+        let start = Instant::now();
+        let reserve = self.cycle_reserve(substep);
+        self.phase_times.neighbors += start.elapsed().as_secs_f64();
+        // Every pair that may close within the cycle is listed, and stays listed through its
+        // second half.
+        self.prepare(0.5 * reserve)?;
+        let roles_start = Instant::now();
+        self.assign_cycle_roles(reserve);
+        self.phase_times.neighbors += roles_start.elapsed().as_secs_f64();
+
+        let mut totals = StepTotals::default();
+        let mut ends = PassEnds::default();
+        for second in [false, true] {
+            let pairs_start = Instant::now();
+            let pair_sums = self.compute_pair_contacts(second)?;
+            let grains_start = Instant::now();
+            self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
+            if !second {
+                // The contacts capped at the cycle's start.
+                totals.capped_contacts = pair_sums.capped;
+            }
+            let carried_box = self.carried_box(substep);
+            let half = self.grain_pass(substep, Some(second), carried_box, &mut totals)?;
+            ends.contact_ends += half.contact_ends;
+            self.move_walls(substep, carried_box);
+            self.phase_times.grains += grains_start.elapsed().as_secs_f64();
+        }
+        totals.contacts = ends.contact_ends / 2;
+        self.time += 2.0 * substep;
+        self.step += 1;
+        self.totals = totals;
+        Ok(())
+    }
+
+    /// How close (between bounding circles) a rigid grain must be to a deforming one to take
+    /// the two substeps of a cycle: twice what any pair can close over the cycle, from the
+    /// fastest grain's speed and growth and the box's deformation.
+    fn cycle_reserve(&self, substep: f64) -> f64 {
+        let (speed_squared, growth, reach) = self
+            .grains
+            .par_chunks(GRAIN_CHUNK)
+            .map(|chunk| {
+                let mut bound = (0.0f64, 0.0f64, 0.0f64);
+                for g in chunk {
+                    bound.0 = bound.0.max(g.velocity.length_squared());
+                    bound.1 = bound
+                        .1
+                        .max(g.radius * g.eps1_rate.abs().max(g.eps2_rate.abs()));
+                    bound.2 = bound.2.max(g.radius * (1.0 + g.eps1.max(g.eps2).max(0.0)));
+                }
+                bound
+            })
+            .reduce(
+                || (0.0, 0.0, 0.0),
+                |a, b| (a.0.max(b.0), a.1.max(b.1), a.2.max(b.2)),
+            );
+        let cycle = 2.0 * substep;
+        // One grain's motion plus growth over the cycle; a pair closes by at most twice that.
+        let motion = cycle * (speed_squared.sqrt() + growth);
+        let closing = 2.0 * motion;
+        let strain = match self.carried_box(cycle) {
+            Some(((lo, hi), (lo_after, hi_after))) => ((hi_after - lo_after) / (hi - lo)
+                - DVec2::ONE)
+                .abs()
+                .max_element(),
+            None => 0.0,
+        };
+        2.0 * (closing + strain * (2.0 * reach + closing))
+    }
+
+    /// Each grain's role in the coming cycle: fast when it deforms, or when its bounding
+    /// circle lies within `reserve` of a deforming grain's. Every such pair is listed (the
+    /// list was checked with half that reserve), so the roles do not depend on when the list
+    /// was built.
+    fn assign_cycle_roles(&mut self, reserve: f64) {
+        let (levels, neighbors) = (&self.levels, &self.neighbors);
+        let (centers, reach) = (&self.centers, &self.reach);
+        let deforming = |g: usize| levels[g].level != ModelLevel::Rigid;
+        let near = |g: usize, other: usize| {
+            deforming(other)
+                && centers[g].distance(centers[other]) - reach[g] - reach[other] < reserve
+        };
+        self.fast.resize(self.grains.len(), false);
+        self.fast
+            .par_chunks_mut(GRAIN_CHUNK)
+            .enumerate()
+            .for_each(|(chunk, fast)| {
+                for (k, fast) in fast.iter_mut().enumerate() {
+                    let g = chunk * GRAIN_CHUNK + k;
+                    *fast = deforming(g)
+                        || neighbors
+                            .second_ends_of(g)
+                            .iter()
+                            .any(|&p| near(g, neighbors.pairs[p as usize][0] as usize))
+                        || neighbors
+                            .first_ends_of(g)
+                            .any(|p| near(g, neighbors.pairs[p][1] as usize));
+                }
+            });
+    }
+
+    /// The affine carry over `dt` in an affine phase (not in a periodic cell): from the box now
+    /// to the box after the walls' move.
+    fn carried_box(&self, dt: f64) -> Option<((DVec2, DVec2), (DVec2, DVec2))> {
+        (self.affine_carry && self.periodic.is_none())
+            .then(|| (box_corners(&self.walls), box_corners_after(&self.walls, dt)))
+    }
+
+    /// The walls' move over `dt`, after the grains were carried by `carried_box`.
+    fn move_walls(&mut self, dt: f64, carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>) {
+        if let Some((from, to)) = carried_box {
+            self.neighbors.follow_affine(from, to);
+        }
+        for wall in &mut self.walls {
+            wall.point = wall.point_after(dt);
+        }
+    }
+
+    /// The grain pass over every grain (see [`GrainPass`]): `cycle` is `None` for a plain step,
+    /// else whether it runs the cycle's second half. Its sums are added to `totals` in chunk
+    /// order.
+    fn grain_pass(
+        &mut self,
+        dt: f64,
+        cycle: Option<bool>,
+        carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>,
+        totals: &mut StepTotals,
+    ) -> Result<PassEnds, Instability> {
         let params = &self.params;
         let cell = self.cell();
         // A periodic cell's virtual walls meet no grain.
@@ -788,11 +1025,8 @@ impl World {
             .friction
             .as_ref()
             .map_or([0.0; MAX_WALLS], |f| f.walls);
-        // The affine carry over this step: from the box now to the box after the walls' move
-        // at its end. Applied to each grain right after its update, where the pass has the
-        // grain at hand (a pass of its own after the step cost some 4% of a 10⁵-grain run).
-        let carried_box = (self.affine_carry && cell.is_none())
-            .then(|| (box_corners(walls), box_corners_after(walls, params.dt)));
+        // The affine carry is applied to each grain right after its update, where the pass has
+        // the grain at hand (a pass of its own after the step cost some 4% of a 10⁵-grain run).
         let pass = GrainPass {
             params,
             contours: &self.contours,
@@ -807,6 +1041,11 @@ impl World {
             wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
             carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
             step: self.step,
+            dt,
+            cycle: cycle.map(|second| CycleHalf {
+                fast: &self.fast,
+                second,
+            }),
         };
         let chunk_sums: Vec<ChunkSums> = self
             .grains
@@ -840,19 +1079,12 @@ impl World {
         // failure is reported after the pass).
         self.frames_current = true;
 
-        let mut totals = StepTotals {
-            capped_contacts: pair_sums.capped,
-            friction_dissipation: pair_sums.dissipation,
-            sliding_contacts: pair_sums.sliding,
-            ..Default::default()
-        };
-        let mut contact_ends = 0;
-        let mut momentum_flux = [0.0; 3];
+        let mut ends = PassEnds::default();
         for sums in &chunk_sums {
             if let Some(f) = sums.failure {
                 return Err(f);
             }
-            for (sum, x) in momentum_flux.iter_mut().zip(sums.momentum_flux) {
+            for (sum, x) in ends.momentum_flux.iter_mut().zip(sums.momentum_flux) {
                 *sum += x;
             }
             for w in 0..MAX_WALLS {
@@ -867,38 +1099,9 @@ impl World {
             for l in 0..3 {
                 totals.level_counts[l] += sums.totals.level_counts[l];
             }
-            contact_ends += sums.contact_ends;
+            ends.contact_ends += sums.contact_ends;
         }
-        totals.contacts = contact_ends / 2;
-        let dt = self.params.dt;
-        match self.periodic.as_mut() {
-            Some(periodic) => {
-                let area_before = periodic.cell(&self.walls).area();
-                let motion = periodic.advance(&mut self.walls, dt);
-                let area = motion.current.area();
-                totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
-                totals.kinetic_stress = momentum_flux.map(|m| -m / area);
-                self.follow_cell(&motion);
-            }
-            None => {
-                if let Some((from, to)) = carried_box {
-                    self.neighbors.follow_affine(from, to);
-                }
-                for wall in &mut self.walls {
-                    wall.point = wall.point_after(dt);
-                }
-            }
-        }
-        self.time += dt;
-        self.step += 1;
-        if self.params.friction.is_some() {
-            self.friction_work += totals.friction_dissipation;
-        }
-        self.totals = totals;
-        // The next step's time step, from the levels the grains chose (a fixed-order sum).
-        self.apply_adaptive_dt();
-        self.phase_times.grains += grains_start.elapsed().as_secs_f64();
-        Ok(&self.totals)
+        Ok(ends)
     }
 
     /// Carries the grain centres with the cell's affine deformation over the step, wraps them
@@ -1193,7 +1396,7 @@ mod tests {
         world.grains_mut()[5].velocity += DVec2::new(1e-3, 0.0);
         world.grains_mut()[6].eps2 += 1e-3;
         assert!(!world.frames_current);
-        world.prepare().unwrap();
+        world.prepare(0.0).unwrap();
         frames_match_grains(&world).unwrap();
         world.step().unwrap();
         frames_match_grains(&world).unwrap();

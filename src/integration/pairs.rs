@@ -46,6 +46,9 @@ pub(super) struct PairPass<'a> {
     /// In a periodic cell: the cell, and the velocity gradient of the affine field, which adds
     /// `L d` to the relative velocity of a pair of branch vector d.
     pub periodic: Option<(PeriodicCell, DMat2)>,
+    /// The second half of a multi-rate cycle: only the pairs of two grains that take two steps
+    /// of it (`fast`) are computed; the others keep the first half's records.
+    pub only_fast: Option<&'a [bool]>,
 }
 
 /// Where the second grain of a pair is met: the centre of its image that meets the first, the
@@ -96,6 +99,21 @@ impl PairPass<'_> {
     ) -> PairSums {
         let mut sums = PairSums::default();
         let count = states.len();
+        if let Some(fast) = self.only_fast {
+            for k in 0..count {
+                let [i, j] = self.pairs[first_pair + k];
+                if fast[i as usize] && fast[j as usize] {
+                    self.one_pair::<FRICTIONAL>(
+                        first_pair + k,
+                        &mut states[k],
+                        &mut actives[k],
+                        &mut records[k],
+                        &mut sums,
+                    );
+                }
+            }
+            return sums;
+        }
         let mut k = 0;
         while k < count {
             let p = first_pair + k;
@@ -643,6 +661,7 @@ mod tests {
                 images: &images,
                 step: 7,
                 periodic: periodic.then_some((cell, velocity_gradient)),
+                only_fast: None,
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)

@@ -118,7 +118,16 @@ pub struct Adaptive {
     /// (indexed by [`ModelLevel::index`]). Rigid grains have no deformation coupling, so their
     /// critical step is sqrt(5) times larger (see [`stiffest_modes`]).
     pub dt: [f64; 3],
+    /// Multi-rate cycles ([`World::step`](super::World::step)): while some grains deform and
+    /// at least [`MULTI_RATE_MIN_RIGID_SHARE`] of them are rigid, the deforming grains (and the
+    /// rigid grains that may meet them) take two steps of their level's while the other rigid
+    /// grains take one of twice that.
+    pub multi_rate: bool,
 }
+
+/// The share of rigid grains below which a multi-rate world takes plain steps: the cycle saves
+/// work only on the grains that take one step of it, and costs a pass of roles.
+pub const MULTI_RATE_MIN_RIGID_SHARE: f64 = 0.25;
 
 impl Adaptive {
     /// `fraction` of the critical step of each level, for the smallest grain.
@@ -136,6 +145,7 @@ impl Adaptive {
                 fraction
                     * frictional_critical_time_step(material, law, min_radius, level, mode_settings)
             }),
+            multi_rate: false,
         }
     }
 }

@@ -161,6 +161,9 @@ pub struct AdaptiveStats {
     pub grain_steps_by_level: [u64; 3],
     /// The time step for each highest level.
     pub dt_by_highest_level: [f64; 3],
+    /// Steps that were multi-rate cycles (see [`crate::integration::World::step`]); each
+    /// lasts twice the full level's time step and counts once in `steps_by_highest_level`.
+    pub cycles: u64,
 }
 
 /// A phase with a stress target stops with [`RunError::TargetUnreachable`] once the packing
@@ -611,6 +614,9 @@ pub(crate) fn write_summary(
                 "adaptive_grain_step_fraction_{name} = {:.4}",
                 a.grain_steps_by_level[k] as f64 / total.max(1) as f64
             )?;
+        }
+        if a.cycles > 0 {
+            writeln!(f, "adaptive_multi_rate_cycles = {}", a.cycles)?;
         }
     }
     writeln!(

@@ -98,6 +98,7 @@ impl Progress {
         sim: &impl Simulation,
         load: &LoadState,
         started: Instant,
+        first_step: u64,
     ) {
         let phi = load.phi;
         if !self.enabled {
@@ -154,7 +155,7 @@ impl Progress {
             phi,
             load.mean_stress(),
             sim.contacts(),
-            sim.step_count() as f64 * sim.grain_count() as f64 / elapsed
+            (sim.step_count() - first_step) as f64 * sim.grain_count() as f64 / elapsed
         ));
     }
 

@@ -112,9 +112,11 @@ impl Simulation for Sdem {
 
     fn take_step(&mut self) -> Result<(), Instability> {
         let highest_before = highest_level(&self.world.totals.level_counts);
+        let cycle = self.world.cycle_substep().is_some();
         self.world.step()?;
         if let Some(stats) = self.adaptive.as_mut() {
             stats.steps_by_highest_level[highest_before] += 1;
+            stats.cycles += cycle as u64;
             for (sum, count) in stats
                 .grain_steps_by_level
                 .iter_mut()

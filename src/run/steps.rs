@@ -63,6 +63,9 @@ pub(super) struct Run<'a> {
     last_checkpoint: Instant,
     progress: Progress,
     started: Instant,
+    /// The step the run (or the resumed part of it) started from: the progress lines' speed
+    /// counts the steps since.
+    first_step: u64,
     last_progress: Instant,
     last_row: Measures,
 }
@@ -108,6 +111,7 @@ impl<'a> Run<'a> {
             last_checkpoint: Instant::now(),
             progress: Progress::new(options.progress_bar, &phases),
             started: Instant::now(),
+            first_step: sim.step_count(),
             last_progress: Instant::now(),
             last_row: sim.measures("start", 0.0),
         })
@@ -434,7 +438,8 @@ impl<'a> Run<'a> {
         rate: f64,
     ) {
         let p_c = load.mean_stress();
-        self.progress.update(program, sim, load, self.started);
+        self.progress
+            .update(program, sim, load, self.started, self.first_step);
         if let Some(seconds) = self.options.progress_seconds
             && self.last_progress.elapsed().as_secs_f64() >= seconds
         {
@@ -449,7 +454,7 @@ impl<'a> Run<'a> {
                 p_c,
                 rate,
                 sim.contacts(),
-                sim.step_count() as f64 * sim.grain_count() as f64 / elapsed
+                (sim.step_count() - self.first_step) as f64 * sim.grain_count() as f64 / elapsed
             ));
         }
     }

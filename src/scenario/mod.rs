@@ -386,6 +386,11 @@ pub enum Model {
         confirm: u32,
         #[serde(default = "adaptive_default::dwell")]
         dwell: u32,
+        /// Multi-rate cycles: while some grains deform, the rigid grains out of their reach
+        /// take one step of twice the deforming grains' (see
+        /// [`crate::integration::Adaptive::multi_rate`]). Off by default.
+        #[serde(default)]
+        multi_rate: bool,
     },
 }
 
@@ -421,7 +426,19 @@ impl Model {
             full_down: s.full_down,
             confirm: s.confirm,
             dwell: s.dwell,
+            multi_rate: false,
         }
+    }
+
+    /// Whether the adaptive model takes multi-rate cycles.
+    pub fn multi_rate(&self) -> bool {
+        matches!(
+            self,
+            Model::Adaptive {
+                multi_rate: true,
+                ..
+            }
+        )
     }
 
     /// The thresholds, for the adaptive model.
@@ -434,6 +451,7 @@ impl Model {
                 full_down,
                 confirm,
                 dwell,
+                ..
             } => Some(AdaptiveSettings {
                 volumetric_up,
                 volumetric_down,
@@ -969,6 +987,7 @@ impl Scenario {
         self.validate_solver_choice(&mut warnings)?;
         self.validate_boundary(&mut warnings)?;
         self.validate_friction()?;
+        self.validate_multi_rate()?;
         let c = &self.contact;
         positive("contact.a", c.a)?;
         positive("contact.b", c.b)?;
@@ -1130,6 +1149,30 @@ impl Scenario {
     }
 
     /// Friction coefficients and the tangential spring; the planes.
+    /// Multi-rate cycles hold the forces between the grains that take one step of a cycle and
+    /// those that take two: a frictional contact's spring and a periodic cell's images and
+    /// stress would need their own substeps, which are not written.
+    fn validate_multi_rate(&self) -> Result<(), ScenarioError> {
+        if !self.model.multi_rate() {
+            return Ok(());
+        }
+        if self.friction().is_some() {
+            return Err(invalid(
+                "model.Adaptive.multi_rate",
+                "true",
+                "false with friction (contact.friction): multi-rate cycles are frictionless",
+            ));
+        }
+        if !self.boundary.is_walls() {
+            return Err(invalid(
+                "model.Adaptive.multi_rate",
+                "true",
+                "false in a periodic cell (boundary: Periodic): multi-rate cycles need walls",
+            ));
+        }
+        Ok(())
+    }
+
     fn validate_friction(&self) -> Result<(), ScenarioError> {
         self.contact
             .friction
@@ -1445,19 +1488,23 @@ impl Scenario {
 
     /// The engine parameters this scenario asks for.
     pub fn parameters(&self) -> Parameters {
-        let adaptive = self.model.adaptive().map(|settings| match self.time_step {
-            TimeStep::FractionOfCritical(f) => Adaptive::fraction_of_critical(
-                settings,
-                f,
-                &self.material,
-                &self.secant_law(),
-                self.smallest_radius(),
-                self.mode_settings(),
-            ),
-            TimeStep::Fixed(dt) => Adaptive {
-                settings,
-                dt: [dt; 3],
-            },
+        let adaptive = self.model.adaptive().map(|settings| Adaptive {
+            multi_rate: self.model.multi_rate(),
+            ..match self.time_step {
+                TimeStep::FractionOfCritical(f) => Adaptive::fraction_of_critical(
+                    settings,
+                    f,
+                    &self.material,
+                    &self.secant_law(),
+                    self.smallest_radius(),
+                    self.mode_settings(),
+                ),
+                TimeStep::Fixed(dt) => Adaptive {
+                    settings,
+                    dt: [dt; 3],
+                    multi_rate: false,
+                },
+            }
         });
         Parameters {
             material: self.material,
