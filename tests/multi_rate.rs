@@ -5,6 +5,7 @@
 use glam::DVec2;
 mod common;
 use common::grain_bits;
+use sdem::boundary::periodic::PeriodicBoundary;
 use sdem::boundary::walls::{Wall, box_walls};
 use sdem::grain::{AdaptiveSettings, Grain, GrainLevel, Material, ModelLevel};
 use sdem::integration::parameters::{Adaptive, ModeSettings};
@@ -106,6 +107,12 @@ fn a_cycle_is_taken_only_with_rigid_and_deforming_grains_side_by_side() {
     let mixed = pressed_lattice(params(0.5, 0.5, true), 12, 8, 5.0);
     assert_eq!(mixed.cycle_substep(), Some(full_step));
     assert_eq!(mixed.params.dt, 2.0 * full_step);
+
+    // A periodic cell takes none (its carry and images are not written for cycles).
+    let periodic = pressed_lattice(params(0.5, 0.5, true), 12, 8, 5.0)
+        .with_periodic(PeriodicBoundary::default());
+    assert_eq!(periodic.cycle_substep(), None);
+    assert_eq!(periodic.params.dt, full_step);
 
     let off = pressed_lattice(params(0.5, 0.5, false), 12, 8, 5.0);
     assert_eq!(off.cycle_substep(), None);

@@ -606,6 +606,10 @@ impl World {
     pub fn with_periodic(mut self, periodic: PeriodicBoundary) -> Self {
         periodic.orient_walls(&mut self.walls);
         self.periodic = Some(periodic);
+        // A periodic cell takes no multi-rate cycles: a cycle planned for the box is undone.
+        if self.cycle_substep.is_some() {
+            self.apply_adaptive_dt();
+        }
         self
     }
 
