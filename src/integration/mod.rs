@@ -683,10 +683,9 @@ impl World {
         Ok(())
     }
 
-    /// Recomputes shapes, velocity fields and the neighbour list for the current state.
-    /// Frames (when stale) and the neighbour list, checked with `reserve` of every grain's
-    /// budget kept for motion before the next check (see
-    /// [`NeighborList::needs_rebuild_with_reserve`]).
+    /// Recomputes shapes and velocity fields (when stale) and the neighbour list for the
+    /// current state; the list's check keeps `reserve` of every grain's budget for motion
+    /// before the next check (see [`NeighborList::needs_rebuild_with_reserve`]).
     fn prepare(&mut self, reserve: f64) -> Result<(), Instability> {
         let start = Instant::now();
         // A grain added after construction gets an empty row of wall history.
