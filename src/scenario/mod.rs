@@ -1148,7 +1148,6 @@ impl Scenario {
         Ok(warnings)
     }
 
-    /// Friction coefficients and the tangential spring; the planes.
     /// Multi-rate cycles hold the forces between the grains that take one step of a cycle and
     /// those that take two: a frictional contact's spring and a periodic cell's images and
     /// stress would need their own substeps, which are not written.
@@ -1173,6 +1172,7 @@ impl Scenario {
         Ok(())
     }
 
+    /// Friction coefficients and the tangential spring; the planes.
     fn validate_friction(&self) -> Result<(), ScenarioError> {
         self.contact
             .friction
