@@ -151,6 +151,8 @@ fn cycles_keep_the_momentum_of_a_free_mixed_packing() {
         // the full ones are fast (the ten of the column beside them).
         let roles = world.cycle_roles();
         assert!(roles.iter().any(|&fast| !fast), "no slow grain");
+        let fast = roles.iter().filter(|&&fast| fast).count() as u64;
+        assert_eq!(world.totals.fast_grains, fast);
         if step == 0 {
             let rigid = |g: usize| world.levels()[g].level == ModelLevel::Rigid;
             let fast_rigid = (0..roles.len()).filter(|&g| roles[g] && rigid(g)).count();
@@ -282,6 +284,12 @@ fn cycled_runs_are_deterministic_resume_bitwise_and_do_not_depend_on_the_skin() 
                 .unwrap();
         let stats = summary.adaptive.expect("adaptive statistics");
         assert!(stats.steps_by_highest_level[2] > 100, "{stats:?}");
+        // Cycles were taken, each with some grains taking one substep.
+        assert!(stats.cycles > 100, "{stats:?}");
+        assert!(
+            stats.cycle_fast_grains > 0 && stats.cycle_fast_grains < stats.cycles * 600,
+            "{stats:?}"
+        );
         dirs.push(dir);
     }
     assert_same_run(&dirs[0], &dirs[1]);

@@ -295,6 +295,8 @@ pub struct StepTotals {
     pub friction_dissipation: f64,
     /// Contacts sliding at the Coulomb limit (grain–grain and grain–wall).
     pub sliding_contacts: u64,
+    /// A multi-rate cycle only: the grains that took its two substeps (0 after a plain step).
+    pub fast_grains: u64,
 }
 
 /// Wall-clock seconds spent in each pass of the step since the world was made, as LAMMPS
@@ -899,7 +901,7 @@ impl World {
         // second half.
         self.prepare(0.5 * reserve)?;
         let roles_start = Instant::now();
-        self.assign_cycle_roles(reserve);
+        let fast_grains = self.assign_cycle_roles(reserve);
         self.phase_times.neighbors += roles_start.elapsed().as_secs_f64();
 
         let mut totals = StepTotals::default();
@@ -920,6 +922,7 @@ impl World {
             self.phase_times.grains += grains_start.elapsed().as_secs_f64();
         }
         totals.contacts = ends.contact_ends / 2;
+        totals.fast_grains = fast_grains;
         self.time += 2.0 * substep;
         self.step += 1;
         self.totals = totals;
@@ -965,8 +968,8 @@ impl World {
     /// Each grain's role in the coming cycle: fast when it deforms, or when its bounding
     /// circle lies within `reserve` of a deforming grain's. Every such pair is listed (the
     /// list was checked with half that reserve), so the roles do not depend on when the list
-    /// was built.
-    fn assign_cycle_roles(&mut self, reserve: f64) {
+    /// was built. Returns how many grains are fast.
+    fn assign_cycle_roles(&mut self, reserve: f64) -> u64 {
         let (levels, neighbors) = (&self.levels, &self.neighbors);
         let (centers, reach) = (&self.centers, &self.reach);
         let deforming = |g: usize| levels[g].level != ModelLevel::Rigid;
@@ -978,7 +981,8 @@ impl World {
         self.fast
             .par_chunks_mut(GRAIN_CHUNK)
             .enumerate()
-            .for_each(|(chunk, fast)| {
+            .map(|(chunk, fast)| {
+                let mut count = 0;
                 for (k, fast) in fast.iter_mut().enumerate() {
                     let g = chunk * GRAIN_CHUNK + k;
                     *fast = deforming(g)
@@ -989,8 +993,11 @@ impl World {
                         || neighbors
                             .first_ends_of(g)
                             .any(|p| near(g, neighbors.pairs[p][1] as usize));
+                    count += *fast as u64;
                 }
-            });
+                count
+            })
+            .sum()
     }
 
     /// The affine carry over `dt` in an affine phase (not in a periodic cell): from the box now

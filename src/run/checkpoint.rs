@@ -241,6 +241,8 @@ impl TotalsBits {
             // Per-step figures of friction, recomputed by the next step.
             friction_dissipation: 0.0,
             sliding_contacts: 0,
+            // A cycle's own figure, recomputed by the next step.
+            fast_grains: 0,
         })
     }
 }

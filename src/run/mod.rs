@@ -164,6 +164,8 @@ pub struct AdaptiveStats {
     /// Steps that were multi-rate cycles (see [`crate::integration::World::step`]); each
     /// lasts twice the full level's time step and counts once in `steps_by_highest_level`.
     pub cycles: u64,
+    /// Over those cycles, the grains that took their two substeps (the others took one).
+    pub cycle_fast_grains: u64,
 }
 
 /// A phase with a stress target stops with [`RunError::TargetUnreachable`] once the packing
@@ -617,6 +619,13 @@ pub(crate) fn write_summary(
         }
         if a.cycles > 0 {
             writeln!(f, "adaptive_multi_rate_cycles = {}", a.cycles)?;
+            // The share of the cycles' grain-steps that took two substeps: the cycles' cost
+            // against plain steps at the full level's step, whatever the machine.
+            writeln!(
+                f,
+                "adaptive_multi_rate_fast_fraction = {:.4}",
+                a.cycle_fast_grains as f64 / (a.cycles as f64 * s.grains as f64).max(1.0)
+            )?;
         }
     }
     writeln!(

@@ -117,6 +117,7 @@ impl Simulation for Sdem {
         if let Some(stats) = self.adaptive.as_mut() {
             stats.steps_by_highest_level[highest_before] += 1;
             stats.cycles += cycle as u64;
+            stats.cycle_fast_grains += self.world.totals.fast_grains;
             for (sum, count) in stats
                 .grain_steps_by_level
                 .iter_mut()
