@@ -184,6 +184,75 @@ fn step_loose_rigid(bencher: divan::Bencher, grains: usize) {
     time_steps(bencher, world);
 }
 
+/// The adaptive level on the dense packing of 10,000 grains with one grain in `ONE_IN` at the
+/// full level and the others rigid (levels held fixed), as in the burst at the end of
+/// `isotropic_100k.ron`'s fast compaction (up to one grain in twenty deforming): plain steps
+/// of the full level's step h (`multi_rate = false`) against multi-rate cycles of 2h
+/// (`true`), where the rigid grains out of the deforming grains' reach take one step of 2h.
+/// Counted in grain-steps of h, so that the two throughputs compare the same simulated time.
+/// The pairs of a deforming grain take the polygon kernel in both halves of a cycle: what a
+/// cycle saves is the rigid pairs' and grains' second substep.
+#[divan::bench(consts = [100, 20], args = [false, true], sample_count = 30)]
+fn step_mixed_adaptive<const ONE_IN: usize>(bencher: divan::Bencher, multi_rate: bool) {
+    use sdem::grain::{AdaptiveSettings, GrainLevel, ModelLevel};
+    use sdem::integration::parameters::{Adaptive, ModeSettings};
+    let mut world = sdem::run::bench::dense_packing(10_000, 1.0);
+    let held = AdaptiveSettings {
+        volumetric_up: f64::MAX,
+        volumetric_down: 0.0,
+        full_up: f64::MAX,
+        full_down: 0.0,
+        confirm: 0,
+        dwell: u32::MAX,
+    };
+    let min_radius = world
+        .grains()
+        .iter()
+        .map(|g| g.radius)
+        .fold(f64::MAX, f64::min);
+    let p = &mut world.params;
+    p.adaptive = Some(Adaptive {
+        multi_rate,
+        ..Adaptive::fraction_of_critical(
+            held,
+            0.4,
+            &p.material,
+            &p.law,
+            min_radius,
+            ModeSettings::default(),
+        )
+    });
+    let levels: Vec<GrainLevel> = (0..world.grains().len())
+        .map(|g| {
+            GrainLevel::new(if g % ONE_IN == 0 {
+                ModelLevel::Full
+            } else {
+                ModelLevel::Rigid
+            })
+        })
+        .collect();
+    world.set_levels(&levels);
+    // The lattice's release first: while its grains fly apart, the cycles' reach (from the
+    // fastest grain) rebuilds the neighbour list in two cycles of three.
+    for _ in 0..200 {
+        world.step().unwrap();
+    }
+    assert_eq!(
+        world.cycle_substep().is_some(),
+        multi_rate,
+        "cycles are taken when asked for"
+    );
+    world.step().unwrap();
+    let substeps = if multi_rate { 2 } else { 1 };
+    bencher
+        .counter(divan::counter::ItemsCount::new(
+            substeps * world.grains().len(),
+        ))
+        .bench_local(|| {
+            world.step().unwrap();
+        });
+}
+
 /// A neighbour-list build on the dense packing's centres (skin 0.2 of the mean radius, as
 /// the step uses): the binning, the pair search and the per-grain index.
 #[divan::bench(args = [10000, 100000], sample_count = 10)]
