@@ -7,9 +7,9 @@
 //! 2. per candidate pair: contact geometry and force, written to the pair's own slot
 //!    ([`pairs`]: circles eight pairs at a time);
 //! 3. per grain: sum of its contacts in pair order (plus its wall contacts), stresses, update
-//!    (`grain_pass.rs`);
-//! 4. in a periodic cell (SPEC §14), per grain: carried by the cell's affine deformation over the
-//!    step and wrapped back into the cell (`World::follow_cell`).
+//!    (`grain_pass.rs`); in a periodic cell (SPEC §14) each updated grain is then carried by
+//!    the cell's affine deformation over the step and wrapped back into the cell, and the
+//!    neighbour list follows the wraps (`World::follow_cell`).
 //!
 //! In a periodic cell a pair `[i, j]` meets the image of j at `x_j + H n` (its image vector n in
 //! the neighbour list); its relative velocity adds the affine field's `L d` (d the branch vector),
@@ -363,6 +363,8 @@ struct PassEnds {
     momentum_flux: [f64; 3],
     /// Grain–grain contact ends (each contact counted by both grains).
     contact_ends: u64,
+    /// Grains a periodic cell wrapped back into it.
+    wrapped: u64,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -371,6 +373,8 @@ struct ChunkSums {
     /// `sum m v ⊗ v` (xx, yy, xy).
     momentum_flux: [f64; 3],
     contact_ends: u64,
+    /// Grains a periodic cell wrapped back into it.
+    wrapped: u64,
     failure: Option<Instability>,
 }
 
@@ -436,7 +440,8 @@ pub struct World {
     /// Per-step scratch for the broad phase (kept to avoid an allocation every step).
     centers: Vec<DVec2>,
     reach: Vec<f64>,
-    /// Per-step scratch of a periodic cell: the image shift each grain was wrapped by.
+    /// Per-step scratch of a periodic cell: the image shift each grain was wrapped by (written
+    /// by the grain pass; sized for every world, whose chunks carry it).
     wraps: Vec<[i64; 2]>,
     /// Energy dissipated by Coulomb sliding since the run started.
     pub friction_work: f64,
@@ -869,16 +874,27 @@ impl World {
             sliding_contacts: pair_sums.sliding,
             ..Default::default()
         };
-        let ends = self.grain_pass(dt, None, carried_box, &mut totals)?;
+        // A periodic cell moves first: the grain pass carries and wraps each grain with it.
+        // (Its motion depends only on the walls' velocities, which the loading set before the
+        // step. A step that fails leaves the cell moved with the grains updated.)
+        let cell_motion = self.periodic.as_mut().map(|periodic| {
+            let area_before = periodic.cell(&self.walls).area();
+            (periodic.advance(&mut self.walls, dt), area_before)
+        });
+        let ends = self.grain_pass(
+            dt,
+            None,
+            carried_box,
+            cell_motion.map(|(motion, _)| motion),
+            &mut totals,
+        )?;
         totals.contacts = ends.contact_ends / 2;
-        match self.periodic.as_mut() {
-            Some(periodic) => {
-                let area_before = periodic.cell(&self.walls).area();
-                let motion = periodic.advance(&mut self.walls, dt);
+        match cell_motion {
+            Some((motion, area_before)) => {
                 let area = motion.current.area();
                 totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
                 totals.kinetic_stress = ends.momentum_flux.map(|m| -m / area);
-                self.follow_cell(&motion);
+                self.follow_cell(&motion, ends.wrapped);
             }
             None => self.move_walls(dt, carried_box),
         }
@@ -916,7 +932,7 @@ impl World {
                 totals.capped_contacts = pair_sums.capped;
             }
             let carried_box = self.carried_box(substep);
-            let half = self.grain_pass(substep, Some(second), carried_box, &mut totals)?;
+            let half = self.grain_pass(substep, Some(second), carried_box, None, &mut totals)?;
             ends.contact_ends += half.contact_ends;
             self.move_walls(substep, carried_box);
             self.phase_times.grains += grains_start.elapsed().as_secs_f64();
@@ -1025,10 +1041,15 @@ impl World {
         dt: f64,
         cycle: Option<bool>,
         carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>,
+        cell_motion: Option<CellMotion>,
         totals: &mut StepTotals,
     ) -> Result<PassEnds, Instability> {
+        // The wraps are written by the pass in a periodic cell; elsewhere they are a scratch
+        // row the chunks carry unread.
+        self.wraps.resize(self.grains.len(), [0, 0]);
         let params = &self.params;
-        let cell = self.cell();
+        // The cell at the start of the step (where the pairs met), before `cell_motion`.
+        let cell = cell_motion.map(|motion| motion.before);
         // A periodic cell's virtual walls meet no grain.
         let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
         let wall_friction = params
@@ -1050,6 +1071,7 @@ impl World {
             // A frictional wall drops the springs of the grains it no longer touches.
             wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
             carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
+            cell_motion,
             step: self.step,
             dt,
             cycle: cycle.map(|second| CycleHalf {
@@ -1066,11 +1088,18 @@ impl World {
             .zip(self.frames.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.centers.par_chunks_mut(GRAIN_CHUNK))
             .zip(self.reach.par_chunks_mut(GRAIN_CHUNK))
+            .zip(self.wraps.par_chunks_mut(GRAIN_CHUNK))
             .enumerate()
             .map(
                 |(
                     chunk,
-                    ((((((grains, stresses), levels), wall_histories), frames), centers), reach),
+                    (
+                        (
+                            (((((grains, stresses), levels), wall_histories), frames), centers),
+                            reach,
+                        ),
+                        wraps,
+                    ),
                 )| {
                     let chunk_grains = GrainChunk {
                         grains,
@@ -1080,6 +1109,7 @@ impl World {
                         frames,
                         centers,
                         reach,
+                        wraps,
                     };
                     pass.chunk(chunk * GRAIN_CHUNK, chunk_grains)
                 },
@@ -1110,39 +1140,15 @@ impl World {
                 totals.level_counts[l] += sums.totals.level_counts[l];
             }
             ends.contact_ends += sums.contact_ends;
+            ends.wrapped += sums.wrapped;
         }
         Ok(ends)
     }
 
-    /// Carries the grain centres with the cell's affine deformation over the step, wraps them
-    /// back into the cell and keeps the pairs' images (or has the list rebuilt after a remap).
-    /// Velocities stay relative to the affine field.
-    fn follow_cell(&mut self, motion: &CellMotion) {
-        self.wraps.resize(self.grains.len(), [0, 0]);
-        // The carry and the wrap move only the centres (velocities stay relative to the
-        // affine field): a frame written by the grain pass stays current once its centre and
-        // the broad phase's copy follow (a frame's centre is its grain's).
-        let frames_current = self.frames_current;
-        // The zip below must not drop a grain: the step's `prepare` sized the frames.
-        debug_assert_eq!(self.frames.len(), self.grains.len());
-        let wrapped = self
-            .grains
-            .par_iter_mut()
-            .zip(self.wraps.par_iter_mut())
-            .zip(self.frames.par_iter_mut().zip(self.centers.par_iter_mut()))
-            .with_min_len(GRAIN_CHUNK)
-            .map(|((g, wrap), (frame, frame_center))| {
-                let (center, image) = motion.current.wrap(motion.carry(g.center));
-                g.center = center;
-                if frames_current {
-                    frame.center = center;
-                    *frame_center = center;
-                }
-                *wrap = image;
-                image != [0, 0]
-            })
-            .filter(|&w| w)
-            .count();
+    /// The neighbour list after a periodic cell's step, whose grain pass carried and wrapped
+    /// the grains (`wrapped` of them took an image shift, written to `self.wraps`): it keeps
+    /// the pairs' images, or is rebuilt after a remap.
+    fn follow_cell(&mut self, motion: &CellMotion, wrapped: u64) {
         if motion.remapped {
             self.neighbors.invalidate();
         } else if wrapped > 0 {
