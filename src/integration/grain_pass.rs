@@ -43,7 +43,7 @@ pub(super) struct GrainPass<'a> {
     /// A periodic cell's motion over the step: each updated grain is carried with the cell's
     /// affine field and wrapped back into the cell, its image shift written to the chunk's
     /// `wraps` (in the pass, where the grain is at hand: a pass of its own cost a periodic
-    /// step some 5–8% of its time, perf).
+    /// step of LAMMPS's 10⁵ packing 5% of its time on one thread and 17% on two).
     pub cell_motion: Option<CellMotion>,
     pub step: u64,
     /// The time step of a plain step; in a multi-rate cycle, that of the grains that take two.
