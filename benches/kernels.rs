@@ -197,14 +197,6 @@ fn step_mixed_adaptive<const ONE_IN: usize>(bencher: divan::Bencher, multi_rate:
     use sdem::grain::{AdaptiveSettings, GrainLevel, ModelLevel};
     use sdem::integration::parameters::{Adaptive, ModeSettings};
     let mut world = sdem::run::bench::dense_packing(10_000, 1.0);
-    let held = AdaptiveSettings {
-        volumetric_up: f64::MAX,
-        volumetric_down: 0.0,
-        full_up: f64::MAX,
-        full_down: 0.0,
-        confirm: 0,
-        dwell: u32::MAX,
-    };
     let min_radius = world
         .grains()
         .iter()
@@ -214,7 +206,7 @@ fn step_mixed_adaptive<const ONE_IN: usize>(bencher: divan::Bencher, multi_rate:
     p.adaptive = Some(Adaptive {
         multi_rate,
         ..Adaptive::fraction_of_critical(
-            held,
+            AdaptiveSettings::HELD,
             0.4,
             &p.material,
             &p.law,

@@ -22,18 +22,6 @@ fn material() -> Material {
     }
 }
 
-/// Levels that never change: the roles of a cycle then follow from where the grains are.
-fn pinned() -> AdaptiveSettings {
-    AdaptiveSettings {
-        volumetric_up: f64::MAX,
-        volumetric_down: 0.0,
-        full_up: f64::MAX,
-        full_down: 0.0,
-        confirm: 0,
-        dwell: u32::MAX,
-    }
-}
-
 /// The adaptive level at `fraction` of each level's critical step for `radius`, with
 /// multi-rate cycles on or off.
 fn params(radius: f64, fraction: f64, multi_rate: bool) -> Parameters {
@@ -41,7 +29,8 @@ fn params(radius: f64, fraction: f64, multi_rate: bool) -> Parameters {
     p.adaptive = Some(Adaptive {
         multi_rate,
         ..Adaptive::fraction_of_critical(
-            pinned(),
+            // Levels that never change: the roles of a cycle follow from where the grains are.
+            AdaptiveSettings::HELD,
             fraction,
             &p.material,
             &p.law,

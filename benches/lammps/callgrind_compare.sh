@@ -14,15 +14,9 @@ sdem=$(realpath "${2:-$here/../../target/release/sdem}")
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
 command -v valgrind >/dev/null || { echo "valgrind not found"; exit 1; }
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
-if [ ! -f dense_$n.data ]; then
-  [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
-  mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
-    -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
-fi
-if [ ! -f sdem_$n/checkpoint.bin ]; then
-  python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
-  "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
-fi
+. "$here/packing.sh"
+lammps_packing "$n"
+sdem_packing "$n" "$sdem"
 total() {
   callgrind_annotate "$1" 2>/dev/null | grep -m1 "PROGRAM TOTALS" | awk '{gsub(",","",$1); print $1}'
 }

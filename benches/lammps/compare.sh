@@ -18,15 +18,9 @@ sdem=$(realpath "${5:-$here/../../target/release/sdem}")
 warmup=${WARMUP:-20}
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
-if [ ! -f dense_$n.data ]; then
-  [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
-  mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
-    -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
-fi
-if [ "${SAME_PACKING:-0}" = 1 ] && [ ! -f sdem_$n/checkpoint.bin ]; then
-  python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
-  "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
-fi
+. "$here/packing.sh"
+lammps_packing "$n"
+if [ "${SAME_PACKING:-0}" = 1 ]; then sdem_packing "$n" "$sdem"; fi
 for r in $(seq 1 "$rounds"); do
   for np in 1 2; do
     pre=""; [ "$np" = 2 ] && pre="mpirun --allow-run-as-root -np 2"

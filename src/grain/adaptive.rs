@@ -42,6 +42,19 @@ pub struct AdaptiveSettings {
     pub dwell: u32,
 }
 
+impl AdaptiveSettings {
+    /// Levels that never change: no stress reaches a threshold up, and no grain outlasts its
+    /// dwell to step down. For tests and benches that set each grain's level and keep it.
+    pub const HELD: Self = Self {
+        volumetric_up: f64::MAX,
+        volumetric_down: 0.0,
+        full_up: f64::MAX,
+        full_down: 0.0,
+        confirm: 0,
+        dwell: u32::MAX,
+    };
+}
+
 impl Default for AdaptiveSettings {
     /// The recommended setting for sample A (docs/speed_accuracy.md).
     fn default() -> Self {
