@@ -554,7 +554,7 @@ pub fn disc_pair_forces<T: Real>(
 /// [`disc_pair_forces`] on the lanes, with AVX where the processor has it (chosen at run time:
 /// the same bits either way), written to `out`. The pair pass keeps one `input` and one `out`
 /// for a chunk's blocks: built for each block, the two (2.5 KB) cost a clear and a copy that
-/// took 4–5% of the rigid level's step (perf, 10⁵ grains).
+/// took about 5% of the rigid level's step (perf, 10⁵ grains).
 #[inline(always)]
 pub fn disc_pair_forces_dispatch(
     input: &DiscPairs<PairLanes>,
