@@ -121,6 +121,12 @@ impl PeriodicCell {
         let s = self.reduced(x);
         let n = DVec2::new(floor_in_cell(s.x), floor_in_cell(s.y));
         let mut wrapped = x - self.matrix * n;
+        if n.x == 0.0 && n.y == 0.0 {
+            // Inside the cell (nearly every grain, every step): `wrapped` is `x` but for the
+            // sign of a zero, its reduced coordinates are `s`'s, in [0, 1), and the fix below
+            // would add nothing.
+            return (wrapped, [0, 0]);
+        }
         // Round-off can leave s = 1 - 1e-17 -> 1 after the shift: keep [0, 1).
         let again = self.reduced(wrapped);
         let fix = DVec2::new(
@@ -136,6 +142,18 @@ impl PeriodicCell {
     /// `(d - H n, n)`. The nearest image of every pair closer than half the cell's smaller width.
     pub fn minimum_image(&self, d: DVec2) -> (DVec2, [i64; 2]) {
         let n = (self.inverse * d).round();
+        (d - self.matrix * n, [n.x as i64, n.y as i64])
+    }
+
+    /// [`minimum_image`](Self::minimum_image) for the candidates of a neighbour search, with
+    /// [`nearest_integer`] in place of `round` (two library calls on the baseline x86-64 build:
+    /// a sixth of a periodic list's build, issue #16). The two differ only at a tie, a
+    /// separation with a reduced component of exactly one half, whose two images both lie at
+    /// least half the cell's width away: beyond the range of any pair the list keeps (the cell
+    /// is at least twice the range wide), so the pairs listed and their images are the same.
+    #[inline]
+    pub fn minimum_image_in_range(&self, d: DVec2) -> (DVec2, [i64; 2]) {
+        let n = nearest_integer(self.inverse * d);
         (d - self.matrix * n, [n.x as i64, n.y as i64])
     }
 
@@ -287,6 +305,16 @@ impl CellMotion {
     }
 }
 
+/// The nearest integers to `v`'s components (ties to even), for components of magnitude below
+/// 2^51: adding and subtracting 1.5 * 2^52 leaves the rounded value, in two additions where
+/// `f64::round` is a library call on x86-64 without SSE4.1 (the neighbour list's rebuild test calls it
+/// for every grain and step of a periodic cell). Only the choice of lattice shift rests on it.
+#[inline(always)]
+pub(crate) fn nearest_integer(v: DVec2) -> DVec2 {
+    const SHIFT: f64 = 6_755_399_441_055_744.0;
+    DVec2::new((v.x + SHIFT) - SHIFT, (v.y + SHIFT) - SHIFT)
+}
+
 /// `v.floor()`, without the call where `v` lies in `[-0, 1)` (a grain inside the cell, as nearly
 /// every grain is after each step's wrap): there the floor is the zero of `v`'s sign. The
 /// baseline x86-64 build has no rounding instruction, and the two calls a grain cost the
@@ -312,6 +340,101 @@ pub fn symmetric_dyad(a: DVec2, b: DVec2) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_integer_matches_round_except_at_ties() {
+        // Expectation: the nearest integer, as f64::round gives it wherever the two roundings
+        // agree (everywhere but exact halves), negative values and large magnitudes included.
+        let mut x = -3.7e9;
+        while x < 3.7e9 {
+            for v in [x, x * 1e-9, -x * 1e-7, x + 0.49, x - 0.51] {
+                let got = nearest_integer(DVec2::new(v, -v));
+                assert_eq!((got.x, got.y), (v.round(), (-v).round()), "{v}");
+            }
+            x += 1.234567e7;
+        }
+        // Ties go to the even neighbour; either is a valid lattice shift there.
+        assert_eq!(
+            nearest_integer(DVec2::new(0.5, -2.5)),
+            DVec2::new(0.0, -2.0)
+        );
+    }
+
+    #[test]
+    fn wrap_inside_the_cell_gives_the_full_formula_to_the_bit() {
+        // Expectation: the shortcut for a point inside the cell returns the bits of the full
+        // wrap (shift, second reduction and fix), signed zeros included, in a sheared cell
+        // with negative entries as in a rectangle.
+        let full = |cell: &PeriodicCell, x: DVec2| {
+            let s = cell.reduced(x);
+            let n = DVec2::new(s.x.floor(), s.y.floor());
+            let mut wrapped = x - cell.matrix * n;
+            let again = cell.reduced(wrapped);
+            let fix = DVec2::new(
+                if again.x >= 1.0 { 1.0 } else { 0.0 },
+                if again.y >= 1.0 { 1.0 } else { 0.0 },
+            );
+            wrapped -= cell.matrix * fix;
+            let n = n + fix;
+            (wrapped, [n.x as i64, n.y as i64])
+        };
+        let cells = [
+            PeriodicCell::rectangle(DVec2::ZERO, 2.0, 1.5).unwrap(),
+            PeriodicCell::new(
+                DVec2::new(-0.3, 0.2),
+                DVec2::new(1.7, -0.4),
+                DVec2::new(-0.6, 1.2),
+            )
+            .unwrap(),
+        ];
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for cell in &cells {
+            let mut points = vec![
+                DVec2::new(0.0, -0.0),
+                DVec2::new(-0.0, -0.0),
+                cell.origin,
+                cell.position(DVec2::new(1.0 - f64::EPSILON, 0.5)),
+            ];
+            for _ in 0..20_000 {
+                points.push(cell.position(DVec2::new(3.0 * next() - 1.0, 3.0 * next() - 1.0)));
+            }
+            for x in points {
+                let (got, image) = cell.wrap(x);
+                let (want, want_image) = full(cell, x);
+                assert_eq!(image, want_image, "{x}");
+                assert_eq!(
+                    (got.x.to_bits(), got.y.to_bits()),
+                    (want.x.to_bits(), want.y.to_bits()),
+                    "{x}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn minimum_image_in_range_is_the_minimum_image_within_half_a_width() {
+        // Expectation: wherever the reduced separation is not a tie, the same image and
+        // separation as `minimum_image`, to the bit.
+        let cell =
+            PeriodicCell::new(DVec2::ZERO, DVec2::new(1.3, 0.2), DVec2::new(-0.5, 0.9)).unwrap();
+        for k in 0..40_000 {
+            let s = DVec2::new((k % 200) as f64 / 99.7 - 1.0, (k / 200) as f64 / 99.3 - 1.0);
+            let d = cell.matrix * s;
+            let (a, na) = cell.minimum_image(d);
+            let (b, nb) = cell.minimum_image_in_range(d);
+            assert_eq!(na, nb, "{d}");
+            assert_eq!(
+                (a.x.to_bits(), a.y.to_bits()),
+                (b.x.to_bits(), b.y.to_bits())
+            );
+        }
+    }
 
     #[test]
     fn floor_in_cell_is_floor_to_the_bit() {

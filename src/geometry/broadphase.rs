@@ -6,12 +6,15 @@
 //! ordered (a stable counting sort into cells, pairs sorted by (i, j)), so the list and every
 //! sum over it are the same whatever the thread count.
 
-use crate::boundary::periodic::PeriodicCell;
+use crate::boundary::periodic::{PeriodicCell, nearest_integer};
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
 
 /// Grains per parallel task of a build.
 const BUILD_CHUNK: usize = 256;
+
+/// The pairs a periodic build's task lists, and their images.
+type ChunkPairs = (Vec<[u32; 2]>, Vec<[i64; 2]>);
 
 #[derive(Debug, Clone, Default)]
 pub struct NeighborList {
@@ -325,43 +328,63 @@ impl NeighborList {
         let wrap = |k: usize, delta: isize, count: usize| -> usize {
             (k as isize + delta).rem_euclid(count as isize) as usize
         };
-        let neighbours: Vec<Vec<(u32, [i64; 2])>> = (0..n)
+        // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
+        // (and one for its bins) made a build six times as long as a box's (issue #16).
+        let chunks: Vec<ChunkPairs> = (0..n.div_ceil(BUILD_CHUNK))
             .into_par_iter()
-            .with_min_len(256)
-            .map(|i| {
-                let ci = centers[i];
-                let (cx, cy) = cell_of(reduced[i]);
-                let mut found = Vec::new();
-                let mut bins = Vec::with_capacity(9);
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        bins.push(wrap(cy, dy, rows) * cols + wrap(cx, dx, cols));
+            .map(|chunk| {
+                let (mut pairs, mut images) = (Vec::new(), Vec::new());
+                let mut found: Vec<(u32, [i64; 2])> = Vec::new();
+                for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
+                    let ci = centers[i];
+                    let (cx, cy) = cell_of(reduced[i]);
+                    let mut bins = [0; 9];
+                    for (k, bin) in bins.iter_mut().enumerate() {
+                        let (dx, dy) = (k as isize % 3 - 1, k as isize / 3 - 1);
+                        *bin = wrap(cy, dy, rows) * cols + wrap(cx, dx, cols);
                     }
-                }
-                bins.sort_unstable();
-                bins.dedup();
-                for k in bins {
-                    for &j in &cell_grains[cell_start[k] as usize..cell_start[k + 1] as usize] {
-                        if (j as usize) <= i {
-                            continue;
+                    // Fewer than 3 bins across: the same bin comes more than once.
+                    let bins = if cols < 3 || rows < 3 {
+                        bins.sort_unstable();
+                        let mut distinct = 1;
+                        for k in 1..bins.len() {
+                            if bins[k] != bins[distinct - 1] {
+                                bins[distinct] = bins[k];
+                                distinct += 1;
+                            }
                         }
-                        // `d = x_j - x_i - H m`: the image of j nearest i is at `x_j - H m`.
-                        let (d, [m1, m2]) = cell.minimum_image(centers[j as usize] - ci);
-                        let limit = reach[i] + reach[j as usize] + skin;
-                        if d.length_squared() < limit * limit {
-                            found.push((j, [-m1, -m2]));
+                        &bins[..distinct]
+                    } else {
+                        &bins[..]
+                    };
+                    found.clear();
+                    for &k in bins {
+                        for &j in &cell_grains[cell_start[k] as usize..cell_start[k + 1] as usize] {
+                            if (j as usize) <= i {
+                                continue;
+                            }
+                            // `d = x_j - x_i - H m`: the image of j nearest i is at `x_j - H m`.
+                            let (d, [m1, m2]) =
+                                cell.minimum_image_in_range(centers[j as usize] - ci);
+                            let limit = reach[i] + reach[j as usize] + skin;
+                            if d.length_squared() < limit * limit {
+                                found.push((j, [-m1, -m2]));
+                            }
                         }
                     }
+                    found.sort_unstable_by_key(|(j, _)| *j);
+                    pairs.extend(found.iter().map(|&(j, _)| [i as u32, j]));
+                    images.extend(found.iter().map(|&(_, image)| image));
                 }
-                found.sort_unstable_by_key(|(j, _)| *j);
-                found
+                (pairs, images)
             })
             .collect();
-        for (i, list) in neighbours.iter().enumerate() {
-            for &(j, image) in list {
-                self.pairs.push([i as u32, j]);
-                self.images.push(image);
-            }
+        let total = chunks.iter().map(|(pairs, _)| pairs.len()).sum();
+        self.pairs.reserve(total);
+        self.images.reserve(total);
+        for (pairs, images) in &chunks {
+            self.pairs.extend_from_slice(pairs);
+            self.images.extend_from_slice(images);
         }
         self.index_pairs_by_grain(n);
     }
@@ -419,16 +442,6 @@ impl NeighborList {
     }
 }
 
-/// The nearest integers to `v`'s components (ties to even), for components of magnitude below
-/// 2^51: adding and subtracting 1.5 * 2^52 leaves the rounded value, in two additions where
-/// `f64::round` is a library call on x86-64 without SSE4.1 (the rebuild test calls it for every
-/// grain and step of a periodic cell). Only the choice of lattice shift rests on it.
-#[inline(always)]
-fn nearest_integer(v: DVec2) -> DVec2 {
-    const SHIFT: f64 = 6_755_399_441_055_744.0;
-    DVec2::new((v.x + SHIFT) - SHIFT, (v.y + SHIFT) - SHIFT)
-}
-
 /// The largest of the bounding radii (0 for none), in parallel: max is exact, so the result
 /// does not depend on how the threads split the slice. A serial fold was a step's only serial
 /// pass over the grains while a box moves affinely.
@@ -463,25 +476,6 @@ fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn nearest_integer_matches_round_except_at_ties() {
-        // Expectation: the nearest integer, as f64::round gives it wherever the two roundings
-        // agree (everywhere but exact halves), negative values and large magnitudes included.
-        let mut x = -3.7e9;
-        while x < 3.7e9 {
-            for v in [x, x * 1e-9, -x * 1e-7, x + 0.49, x - 0.51] {
-                let got = nearest_integer(DVec2::new(v, -v));
-                assert_eq!((got.x, got.y), (v.round(), (-v).round()), "{v}");
-            }
-            x += 1.234567e7;
-        }
-        // Ties go to the even neighbour; either is a valid lattice shift there.
-        assert_eq!(
-            nearest_integer(DVec2::new(0.5, -2.5)),
-            DVec2::new(0.0, -2.0)
-        );
-    }
 
     #[test]
     fn finds_exactly_the_pairs_of_a_brute_force_search() {
@@ -588,7 +582,8 @@ mod tests {
     }
 
     /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
-    /// within range, found by brute force over all pairs, each with that image.
+    /// within range, found by brute force over all pairs, each with that image (in cells of
+    /// more grains than a build's task holds, and of only two bins across).
     #[test]
     fn the_periodic_list_finds_exactly_the_pairs_of_a_brute_force_search() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
@@ -597,6 +592,8 @@ mod tests {
             (DVec2::new(1.0, 0.0), DVec2::new(0.0, 0.8), 400),
             (DVec2::new(1.0, 0.0), DVec2::new(0.45, 0.8), 400),
             (DVec2::new(0.4, 0.0), DVec2::new(-0.15, 0.35), 60),
+            // Two bins across each way: the 3 x 3 neighbouring bins repeat.
+            (DVec2::new(0.25, 0.0), DVec2::new(0.05, 0.24), 40),
         ] {
             let cell = PeriodicCell::new(DVec2::new(-0.3, 0.2), h1, h2).unwrap();
             // Centres anywhere, some outside the cell.
