@@ -120,13 +120,22 @@ impl PeriodicCell {
     pub fn wrap(&self, x: DVec2) -> (DVec2, [i64; 2]) {
         let s = self.reduced(x);
         let n = DVec2::new(floor_in_cell(s.x), floor_in_cell(s.y));
-        let mut wrapped = x - self.matrix * n;
+        let wrapped = x - self.matrix * n;
         if n.x == 0.0 && n.y == 0.0 {
             // Inside the cell (nearly every grain, every step): `wrapped` is `x` but for the
-            // sign of a zero, its reduced coordinates are `s`'s, in [0, 1), and the fix below
-            // would add nothing.
+            // sign of a zero, its reduced coordinates are `s`'s, in [0, 1), and the fix of
+            // `shifted` would add nothing.
             return (wrapped, [0, 0]);
         }
+        self.shifted(wrapped, n)
+    }
+
+    /// The end of [`wrap`](Self::wrap) for a point that took an image shift `n` (now at
+    /// `wrapped`): out of line, so that the pass that wraps every grain inlines only the common
+    /// case.
+    #[cold]
+    #[inline(never)]
+    fn shifted(&self, mut wrapped: DVec2, n: DVec2) -> (DVec2, [i64; 2]) {
         // Round-off can leave s = 1 - 1e-17 -> 1 after the shift: keep [0, 1).
         let again = self.reduced(wrapped);
         let fix = DVec2::new(
