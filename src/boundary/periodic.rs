@@ -372,20 +372,14 @@ mod tests {
     #[test]
     fn wrap_inside_the_cell_gives_the_full_formula_to_the_bit() {
         // Expectation: the shortcut for a point inside the cell returns the bits of the full
-        // wrap (shift, second reduction and fix), signed zeros included, in a sheared cell
-        // with negative entries as in a rectangle.
+        // wrap (the floor's shift, then the second reduction and fix of `shifted`, for every
+        // point), on zeros of either sign, the origin, a point just inside the far side and
+        // points inside and outside, in a sheared cell with negative entries as in a
+        // rectangle.
         let full = |cell: &PeriodicCell, x: DVec2| {
             let s = cell.reduced(x);
             let n = DVec2::new(s.x.floor(), s.y.floor());
-            let mut wrapped = x - cell.matrix * n;
-            let again = cell.reduced(wrapped);
-            let fix = DVec2::new(
-                if again.x >= 1.0 { 1.0 } else { 0.0 },
-                if again.y >= 1.0 { 1.0 } else { 0.0 },
-            );
-            wrapped -= cell.matrix * fix;
-            let n = n + fix;
-            (wrapped, [n.x as i64, n.y as i64])
+            cell.shifted(x - cell.matrix * n, n)
         };
         let cells = [
             PeriodicCell::rectangle(DVec2::ZERO, 2.0, 1.5).unwrap(),
