@@ -156,7 +156,7 @@ impl PeriodicCell {
 
     /// [`minimum_image`](Self::minimum_image) for the candidates of a neighbour search, with
     /// [`nearest_integer`] in place of `round` (two library calls on the baseline x86-64 build:
-    /// a sixth of a periodic list's build, issue #16). The two differ only at a tie, a
+    /// an eighth of a periodic list's build, issue #16). The two differ only at a tie, a
     /// separation with a reduced component of exactly one half, whose two images both lie at
     /// least half the cell's width away: beyond the range of any pair the list keeps (the cell
     /// is at least twice the range wide), so the pairs listed and their images are the same.
@@ -316,8 +316,9 @@ impl CellMotion {
 
 /// The nearest integers to `v`'s components (ties to even), for components of magnitude below
 /// 2^51: adding and subtracting 1.5 * 2^52 leaves the rounded value, in two additions where
-/// `f64::round` is a library call on x86-64 without SSE4.1 (the neighbour list's rebuild test calls it
-/// for every grain and step of a periodic cell). Only the choice of lattice shift rests on it.
+/// `f64::round` is a library call on x86-64 without SSE4.1 (the neighbour list's rebuild test
+/// calls it for every grain and step of a periodic cell). Only the choice of lattice shift rests
+/// on it.
 #[inline(always)]
 pub(crate) fn nearest_integer(v: DVec2) -> DVec2 {
     const SHIFT: f64 = 6_755_399_441_055_744.0;
