@@ -329,7 +329,7 @@ impl NeighborList {
             (k as isize + delta).rem_euclid(count as isize) as usize
         };
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
-        // (and one for its bins) made a build six times as long as a box's (issue #16).
+        // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
         let chunks: Vec<ChunkPairs> = (0..n.div_ceil(BUILD_CHUNK))
             .into_par_iter()
             .map(|chunk| {
@@ -343,22 +343,17 @@ impl NeighborList {
                         let (dx, dy) = (k as isize % 3 - 1, k as isize / 3 - 1);
                         *bin = wrap(cy, dy, rows) * cols + wrap(cx, dx, cols);
                     }
-                    // Fewer than 3 bins across: the same bin comes more than once.
-                    let bins = if cols < 3 || rows < 3 {
+                    // Fewer than 3 bins across: the same bin comes more than once, and is
+                    // visited once.
+                    let repeats = cols < 3 || rows < 3;
+                    if repeats {
                         bins.sort_unstable();
-                        let mut distinct = 1;
-                        for k in 1..bins.len() {
-                            if bins[k] != bins[distinct - 1] {
-                                bins[distinct] = bins[k];
-                                distinct += 1;
-                            }
-                        }
-                        &bins[..distinct]
-                    } else {
-                        &bins[..]
-                    };
+                    }
                     found.clear();
-                    for &k in bins {
+                    for (b, &k) in bins.iter().enumerate() {
+                        if repeats && b > 0 && bins[b - 1] == k {
+                            continue;
+                        }
                         for &j in &cell_grains[cell_start[k] as usize..cell_start[k + 1] as usize] {
                             if (j as usize) <= i {
                                 continue;
