@@ -165,6 +165,18 @@ fn step_dense_packing_rigid(bencher: divan::Bencher, grains: usize) {
     time_steps(bencher, world);
 }
 
+/// The whole step of rigid discs in a periodic cell: the dense packing with its box as the
+/// cell's sides (issue #16, seventeenth and eighteenth sessions: the carry and wrap in the
+/// grain pass, the chunked periodic list build). The lattice leaves a gap of a grain at the
+/// cell's sides, which its grains close during the timed steps, crossing the sides.
+#[divan::bench(args = [1000, 10000], sample_count = 20)]
+fn step_dense_packing_rigid_periodic(bencher: divan::Bencher, grains: usize) {
+    let mut world = sdem::run::bench::dense_packing(grains, 1.0)
+        .with_periodic(sdem::boundary::periodic::PeriodicBoundary::default());
+    sdem::run::bench::with_model(&mut world, sdem::grain::ModelLevel::Rigid);
+    time_steps(bencher, world);
+}
+
 /// The whole step on the dense packing spread apart by 15% (φ about 0.68), every grain a rigid
 /// disc at rest: no contacts, so what is timed is the per-grain work of a loose gas (frames,
 /// the neighbour list's rebuild test, open candidate pairs, the grain pass), which is where
@@ -257,6 +269,23 @@ fn neighbor_list_build(bencher: divan::Bencher, grains: usize) {
         .counter(divan::counter::ItemsCount::new(centers.len()))
         .bench_local(|| {
             list.build(black_box(&centers), black_box(&reach));
+        });
+}
+
+/// [`neighbor_list_build`] in a periodic cell, the packing's box: the pairs across the cell's
+/// sides are listed with the image of their second grain.
+#[divan::bench(args = [10000, 100000], sample_count = 10)]
+fn neighbor_list_build_periodic(bencher: divan::Bencher, grains: usize) {
+    let world = sdem::run::bench::dense_packing(grains, 1.0)
+        .with_periodic(sdem::boundary::periodic::PeriodicBoundary::default());
+    let cell = world.cell().expect("a periodic world");
+    let centers: Vec<DVec2> = world.grains().iter().map(|g| g.center).collect();
+    let reach: Vec<f64> = world.grains().iter().map(|g| g.radius).collect();
+    let mut list = sdem::geometry::broadphase::NeighborList::new(0.2 * 0.012);
+    bencher
+        .counter(divan::counter::ItemsCount::new(centers.len()))
+        .bench_local(|| {
+            list.build_periodic(black_box(&centers), black_box(&reach), black_box(&cell));
         });
 }
 
