@@ -330,7 +330,7 @@ pub(crate) fn nearest_integer(v: DVec2) -> DVec2 {
 /// baseline x86-64 build has no rounding instruction, and the two calls a grain cost the
 /// periodic step 27 instructions a grain-step (callgrind).
 #[inline(always)]
-fn floor_in_cell(v: f64) -> f64 {
+pub(crate) fn floor_in_cell(v: f64) -> f64 {
     if (0.0..1.0).contains(&v) {
         0.0f64.copysign(v)
     } else {

@@ -6,7 +6,7 @@
 //! ordered (a stable counting sort into cells, pairs sorted by (i, j)), so the list and every
 //! sum over it are the same whatever the thread count.
 
-use crate::boundary::periodic::{PeriodicCell, nearest_integer};
+use crate::boundary::periodic::{PeriodicCell, floor_in_cell, nearest_integer};
 use glam::{DMat2, DVec2};
 use rayon::prelude::*;
 
@@ -311,22 +311,38 @@ impl NeighborList {
         let [width1, width2] = cell.widths();
         let cols = ((width1 / range) as usize).clamp(1, 1 << 15);
         let rows = ((width2 / range) as usize).clamp(1, 1 << 15);
-        let reduced = &self.reference_centers;
-        let cell_of = |s: DVec2| -> (usize, usize) {
-            let f = s - s.floor();
-            (
-                ((f.x * cols as f64) as usize).min(cols - 1),
-                ((f.y * rows as f64) as usize).min(rows - 1),
-            )
-        };
+        // Each grain's bin column and row once, in parallel, as in `build` (computed where they
+        // were used, three times a grain, each with two floor calls), packed as `cx | cy << 16`
+        // so that neither takes a division to recover.
+        let column_and_row: Vec<u32> = self
+            .reference_centers
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&s| {
+                // The fractional part, `s - s.floor()` (no call for a grain inside the cell).
+                let f = DVec2::new(s.x - floor_in_cell(s.x), s.y - floor_in_cell(s.y));
+                let cx = ((f.x * cols as f64) as usize).min(cols - 1);
+                let cy = ((f.y * rows as f64) as usize).min(rows - 1);
+                (cx | cy << 16) as u32
+            })
+            .collect();
+        let unpack = |packed: u32| ((packed & 0xffff) as usize, (packed >> 16) as usize);
         let (cell_start, cell_grains) = sort_into_bins(n, cols * rows, |g| {
-            let (cx, cy) = cell_of(reduced[g]);
+            let (cx, cy) = unpack(column_and_row[g]);
             cy * cols + cx
         });
         let skin = self.skin;
-        // With fewer than 3 bins across, the neighbouring bins repeat: each grain is met once.
+        // The bin `delta` (-1, 0 or 1) from bin `k` of `count` round the cell: `rem_euclid`
+        // without its integer divisions (six a grain).
         let wrap = |k: usize, delta: isize, count: usize| -> usize {
-            (k as isize + delta).rem_euclid(count as isize) as usize
+            let next = k as isize + delta;
+            if next < 0 {
+                count - 1
+            } else if next as usize >= count {
+                0
+            } else {
+                next as usize
+            }
         };
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
         // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
@@ -337,7 +353,7 @@ impl NeighborList {
                 let mut found: Vec<(u32, [i64; 2])> = Vec::new();
                 for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
                     let ci = centers[i];
-                    let (cx, cy) = cell_of(reduced[i]);
+                    let (cx, cy) = unpack(column_and_row[i]);
                     let mut bins = [0; 9];
                     for (k, bin) in bins.iter_mut().enumerate() {
                         let (dx, dy) = (k as isize % 3 - 1, k as isize / 3 - 1);
