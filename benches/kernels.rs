@@ -262,14 +262,9 @@ fn step_mixed_adaptive<const ONE_IN: usize>(bencher: divan::Bencher, multi_rate:
 #[divan::bench(args = [10000, 100000], sample_count = 10)]
 fn neighbor_list_build(bencher: divan::Bencher, grains: usize) {
     let world = sdem::run::bench::dense_packing(grains, 1.0);
-    let centers: Vec<DVec2> = world.grains().iter().map(|g| g.center).collect();
-    let reach: Vec<f64> = world.grains().iter().map(|g| g.radius).collect();
-    let mut list = sdem::geometry::broadphase::NeighborList::new(0.2 * 0.012);
-    bencher
-        .counter(divan::counter::ItemsCount::new(centers.len()))
-        .bench_local(|| {
-            list.build(black_box(&centers), black_box(&reach));
-        });
+    time_builds(bencher, &world, |list, centers, reach| {
+        list.build(centers, reach)
+    });
 }
 
 /// [`neighbor_list_build`] in a periodic cell, the packing's box: the pairs across the cell's
@@ -279,14 +274,23 @@ fn neighbor_list_build_periodic(bencher: divan::Bencher, grains: usize) {
     let world = sdem::run::bench::dense_packing(grains, 1.0)
         .with_periodic(sdem::boundary::periodic::PeriodicBoundary::default());
     let cell = world.cell().expect("a periodic world");
+    time_builds(bencher, &world, |list, centers, reach| {
+        list.build_periodic(centers, reach, black_box(&cell))
+    });
+}
+
+/// Times `build` on the world's centres and radii, counted in grains.
+fn time_builds(
+    bencher: divan::Bencher,
+    world: &sdem::integration::World,
+    build: impl Fn(&mut sdem::geometry::broadphase::NeighborList, &[DVec2], &[f64]),
+) {
     let centers: Vec<DVec2> = world.grains().iter().map(|g| g.center).collect();
     let reach: Vec<f64> = world.grains().iter().map(|g| g.radius).collect();
     let mut list = sdem::geometry::broadphase::NeighborList::new(0.2 * 0.012);
     bencher
         .counter(divan::counter::ItemsCount::new(centers.len()))
-        .bench_local(|| {
-            list.build_periodic(black_box(&centers), black_box(&reach), black_box(&cell));
-        });
+        .bench_local(|| build(&mut list, black_box(&centers), black_box(&reach)));
 }
 
 /// Eight pairs of rigid discs at once (issue #16, tenth session): the lane kernel of the pair
