@@ -333,7 +333,7 @@ impl NeighborList {
         });
         let skin = self.skin;
         // The bin `delta` (-1, 0 or 1) from bin `k` of `count` round the cell: `rem_euclid`
-        // without its integer divisions (six a grain).
+        // without its integer divisions (the cell's bin counts are not constants).
         let wrap = |k: usize, delta: isize, count: usize| -> usize {
             let next = k as isize + delta;
             if next < 0 {
