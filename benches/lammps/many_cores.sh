@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Issue #16's figures on a many-core machine, in one call of about 7 minutes on 16 cores:
+#  1. scaling.sh at 10^5 grains (sdem rigid and full, LAMMPS), 1, 2, 4, ... up to every processor;
+#  2. scenarios/isotropic_100k.ron on every processor: wall time, peak memory, and whether its
+#     macro.csv is the shipped one byte for byte (it was run on 2 threads of another machine);
+#  3. `sdem bench` at 10^6 grains on 1 and on every processor: speed and peak memory a grain.
+#   usage: benches/lammps/many_cores.sh [BUNDLE]      (from the repository's root)
+# BUNDLE: a folder made by bundle.sh (sdem, LAMMPS and Open MPI for a machine without them);
+# without it, target/release/sdem and the `lmp` and `mpirun` on PATH. Lines go to stdout and
+# to RESULTS (default benches/lammps/work/many_cores.txt). SCENARIO_SECONDS (default 300) bounds
+# the scenario's run: it takes about 6 minutes on 2 cores.
+set -u
+root=$(cd "$(dirname "$0")/../.." && pwd); cd "$root"
+work=benches/lammps/work; mkdir -p $work
+results=$(realpath -m "${RESULTS:-$work/many_cores.txt}"); : > "$results"
+say() { echo "$@" | tee -a "$results"; }
+sdem=$root/target/release/sdem
+if [ -n "${1:-}" ]; then
+  bundle=$(realpath "$1"); sdem=$bundle/sdem
+  tar -xJf "$bundle/ompi.tar.xz" -C "$bundle"
+  export LMP=$bundle/ompi/bin/lmp
+  export MPIRUN="env LD_LIBRARY_PATH=$bundle/ompi/deps OPAL_PREFIX=$bundle/ompi PATH=$bundle/ompi/bin:$PATH OMPI_MCA_btl=self,vader OMPI_MCA_pml=ob1 OMPI_MCA_btl_vader_single_copy_mechanism=none $bundle/ompi/bin/mpirun"
+  [ -f "$bundle/dense_100000.data.xz" ] && xz -dc "$bundle/dense_100000.data.xz" >$work/dense_100000.data
+  (cd $work && cp ../in.bench ../in.common . && timeout 60 $MPIRUN --allow-run-as-root -np 2 "$LMP" -h >/dev/null) ||
+    { say "the bundle's LAMMPS does not start here: sdem alone"; export NO_LAMMPS=1; }
+fi
+# Peak resident memory of a command's process tree, and its wall time.
+peak() { python3 -c '
+import resource, subprocess, sys, time
+t = time.time(); rc = subprocess.call(sys.argv[1:]); wall = time.time() - t
+print(f"rc={rc} wall={wall:.1f} s peak={resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024:.0f} MB")' "$@"; }
+p=$(nproc); counts=""; c=1
+while [ $c -lt "$p" ]; do counts="$counts $c"; c=$((2 * c)); done; counts="$counts $p"
+say "$(date -u +%FT%TZ) $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $p processors ($(lscpu | awk -F: '/per core/ {gsub(/ /, "", $2); print $2}') a core), $(free -g | awk '/Mem/ {print $2}') GB"
+LAMMPS_ROUNDS=2 timeout 300 benches/lammps/scaling.sh 100000 "$counts" 1000 120 3 "$sdem" | tee -a "$results"
+out=$(mktemp -d)
+r=$(peak timeout "${SCENARIO_SECONDS:-300}" "$sdem" run scenarios/isotropic_100k.ron --out "$out" --quiet 2>&1 | tail -1)
+say "isotropic_100k on $p threads: $r"
+if [[ $r != rc=0* ]]; then say "  did not finish within ${SCENARIO_SECONDS:-300} s (SCENARIO_SECONDS)"
+elif cmp -s "$out/macro.csv" docs/runs/isotropic_100k_issue16_s16/macro.csv; then say "  macro.csv: the shipped one byte for byte"
+else say "  macro.csv: NOT the shipped one"; fi
+rm -rf "$out"
+for model in rigid full; do
+  for t in "$p" 1; do
+    steps=40; [ $model = full ] && steps=12
+    r=$(peak timeout 120 "$sdem" bench --grains 1000000 --steps $steps --warmup 5 --threads "$t" --model $model 2>&1)
+    say "sdem bench N=10^6 model=$model threads=$t: $(echo "$r" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$r" | tail -1)"
+  done
+done
