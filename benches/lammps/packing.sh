@@ -1,12 +1,13 @@
-# Sourced by compare.sh and callgrind_compare.sh: `lammps_packing N` makes work/dense_N.data,
-# LAMMPS's dense packing of N discs (compressed from a gas: about 6 min for 10^5 on 2 cores),
-# unless it is there; `sdem_packing N SDEM` makes work/sdem_N/checkpoint.bin, the same discs as
-# an sdem world (to_sdem.py and a 10-step run), unless it is there. Both run in work/.
+# Sourced by compare.sh, callgrind_compare.sh and scaling.sh: `lammps_packing N` makes
+# work/dense_N.data, LAMMPS's dense packing of N discs (compressed from a gas: about 6 min for
+# 10^5 on 2 cores), unless it is there, with $MPIRUN and $LMP where set (bundle.sh's carried
+# build); `sdem_packing N SDEM` makes work/sdem_N/checkpoint.bin, the same discs as an sdem
+# world (to_sdem.py and a 10-step run), unless it is there. Both run in work/.
 lammps_packing() {
   local n=$1
   if [ ! -f dense_$n.data ]; then
     [ -f init_$n.data ] || python3 ../gen_init.py "$n" 54321 init_$n.data >/dev/null
-    mpirun --allow-run-as-root -np 2 lmp -log log.compress_$n -screen none \
+    ${MPIRUN:-mpirun} --allow-run-as-root -np 2 "${LMP:-lmp}" -log log.compress_$n -screen none \
       -in in.compress -var tag "$n" -var phit 0.85 -var ncomp 20000 -var nrelax 20000
   fi
 }
