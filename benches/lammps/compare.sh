@@ -25,7 +25,7 @@ for r in $(seq 1 "$rounds"); do
   for np in 1 2; do
     pre=""; [ "$np" = 2 ] && pre="mpirun --allow-run-as-root -np 2"
     $pre lmp -log log.bench_${n}_np${np}_r$r -screen none -in in.bench -var tag "$n" -var nsteps "$lsteps" -var mode hold
-    awk -v np="$np" -v n="$n" -v r="$r" '/^Loop time/ {v = $9*n/$4} END {printf "LAMMPS np=%s N=%s round=%s atom-steps/s: %.4e\n", np, n, r, v}' log.bench_${n}_np${np}_r$r
+    echo "LAMMPS np=$np N=$n round=$r atom-steps/s: $(lammps_rate log.bench_${n}_np${np}_r$r "$n")"
   done
   for model in full rigid; do
     for t in 1 2; do

@@ -1,8 +1,9 @@
-# Sourced by compare.sh, callgrind_compare.sh and scaling.sh: `lammps_packing N` makes
+# Sourced by run.sh, compare.sh, callgrind_compare.sh and scaling.sh: `lammps_packing N` makes
 # work/dense_N.data, LAMMPS's dense packing of N discs (compressed from a gas: about 6 min for
 # 10^5 on 2 cores), unless it is there, with $MPIRUN and $LMP where set (bundle.sh's carried
 # build); `sdem_packing N SDEM` makes work/sdem_N/checkpoint.bin, the same discs as an sdem
-# world (to_sdem.py and a 10-step run), unless it is there. Both run in work/.
+# world (to_sdem.py and a 10-step run), unless it is there. Both run in work/. `lammps_rate LOG N`
+# prints the atom-steps per second of a LAMMPS log of N atoms (steps x N / its loop time).
 lammps_packing() {
   local n=$1
   if [ ! -f dense_$n.data ]; then
@@ -17,4 +18,7 @@ sdem_packing() {
     python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
     "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
   fi
+}
+lammps_rate() {
+  awk -v n="$2" '/^Loop time/ {v = $9*n/$4} END {printf "%.4e", v}' "$1"
 }

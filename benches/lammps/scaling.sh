@@ -19,10 +19,11 @@ lmp=${LMP:-lmp}; mpirun=${MPIRUN:-mpirun}
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
 out=scaling_$n.txt; : > "$out"
 say() { echo "$@" | tee -a "$out"; }
+. "$here/packing.sh"
 lammps=1
 if [ "${NO_LAMMPS:-0}" = 1 ]; then lammps=0
 elif ! command -v "$lmp" >/dev/null; then say "lmp not found (apt-get install -y lammps openmpi-bin, or LMP=...): sdem alone"; lammps=0
-else . "$here/packing.sh"; lammps_packing "$n"; fi
+else lammps_packing "$n"; fi
 say "machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) processors; sdem $("$sdem" --version 2>/dev/null | cut -d' ' -f2)"
 for r in $(seq 1 "$rounds"); do
   for t in $counts; do
@@ -36,8 +37,7 @@ for r in $(seq 1 "$rounds"); do
     for np in $counts; do
       $mpirun --allow-run-as-root --oversubscribe --bind-to none -np "$np" "$lmp" -log log.scaling_${n}_np${np}_r$r \
         -screen none -in in.bench -var tag "$n" -var nsteps "$lsteps" -var mode hold
-      awk -v np="$np" -v n="$n" -v r="$r" '/^Loop time/ {v = $9*n/$4} END {printf "LAMMPS processes=%s N=%s round=%s atom-steps/s: %.4e\n", np, n, r, v}' \
-        log.scaling_${n}_np${np}_r$r | tee -a "$out"
+      say "LAMMPS processes=$np N=$n round=$r atom-steps/s: $(lammps_rate log.scaling_${n}_np${np}_r$r "$n")"
     done
   fi
 done
