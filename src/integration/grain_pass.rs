@@ -147,6 +147,7 @@ impl GrainPass<'_> {
             if turn == Turn::SlowSecond {
                 self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
                 frame.write(grain, level.level, density);
+                sums.circle_frames += frame.circle as usize;
                 chunk.centers[k] = frame.center;
                 chunk.reach[k] = frame.bounding_radius;
                 continue;
@@ -259,6 +260,7 @@ impl GrainPass<'_> {
             }
             self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
             frame.write(grain, level.level, density);
+            sums.circle_frames += frame.circle as usize;
             chunk.centers[k] = frame.center;
             chunk.reach[k] = frame.bounding_radius;
         }

@@ -375,6 +375,8 @@ struct ChunkSums {
     contact_ends: u64,
     /// Grains a periodic cell wrapped back into it.
     wrapped: u64,
+    /// Frames written as circles (see [`Frame::circle`]).
+    circle_frames: usize,
     failure: Option<Instability>,
 }
 
@@ -424,6 +426,11 @@ pub struct World {
     /// grains'. Anything else that changes the grains or their levels clears it (the density,
     /// the one parameter a frame reads, is fixed for the world's life).
     frames_current: bool,
+    /// Whether every frame is a circle (see [`Frame::circle`]), kept with the frames: then
+    /// the pair pass takes every block of pairs to the circle lanes without reading the two
+    /// frames' flags of each pair first (issue #16: 20 instructions a grain-step of rigid
+    /// discs).
+    frames_all_circles: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
     /// whether it touched in the last step,
@@ -511,6 +518,7 @@ impl World {
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
             frames_current: false,
+            frames_all_circles: false,
             pair_state: Vec::new(),
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
@@ -718,6 +726,7 @@ impl World {
                     *center = frame.center;
                     *reach = frame.bounding_radius;
                 });
+            self.frames_all_circles = self.frames.par_iter().all(|frame| frame.circle);
             self.frames_current = true;
         }
         let frames_done = Instant::now();
@@ -808,6 +817,7 @@ impl World {
                 .periodic
                 .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
             only_fast: only_fast.then_some(self.fast.as_slice()),
+            all_circles: self.frames_all_circles,
         };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,
@@ -1118,6 +1128,8 @@ impl World {
         // Every grain was updated and given its next frame, failed steps included (a grain's
         // failure is reported after the pass).
         self.frames_current = true;
+        let circle_frames: usize = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
+        self.frames_all_circles = circle_frames == self.frames.len();
 
         let mut ends = PassEnds::default();
         for sums in &chunk_sums {
@@ -1365,7 +1377,42 @@ mod tests {
                 return Err(format!("grain {g}: broad-phase copies differ"));
             }
         }
+        let all_circles = world.frames.iter().all(|frame| frame.circle);
+        if world.frames_all_circles != all_circles {
+            return Err(format!(
+                "frames_all_circles is {}, every frame a circle: {all_circles}",
+                world.frames_all_circles
+            ));
+        }
         Ok(())
+    }
+
+    #[test]
+    fn the_pair_pass_is_told_every_frame_is_a_circle_only_when_each_is() {
+        // Expectation: the flag that sends every block of pairs to the circle lanes follows
+        // the frames, whichever pass writes them: set in a world of rigid discs, cleared as
+        // soon as one grain deforms, set again when it is a disc again.
+        let mut world = crate::run::bench::dense_packing(100, 1.0);
+        crate::run::bench::with_model(&mut world, ModelLevel::Rigid);
+        world.step().unwrap();
+        assert!(world.frames_all_circles);
+        frames_match_grains(&world).unwrap();
+        let mut levels = vec![GrainLevel::new(ModelLevel::Rigid); world.grains.len()];
+        levels[37] = GrainLevel::new(ModelLevel::Full);
+        world.set_levels(&levels);
+        world.prepare(0.0).unwrap();
+        assert!(!world.frames_all_circles);
+        for _ in 0..5 {
+            world.step().unwrap();
+            assert!(!world.frames_all_circles);
+            frames_match_grains(&world).unwrap();
+        }
+        levels[37] = GrainLevel::new(ModelLevel::Rigid);
+        world.set_levels(&levels);
+        world.grains_mut()[37].eps2 = world.grains()[37].eps1;
+        world.step().unwrap();
+        assert!(world.frames_all_circles);
+        frames_match_grains(&world).unwrap();
     }
 
     #[test]

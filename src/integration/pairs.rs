@@ -49,6 +49,8 @@ pub(super) struct PairPass<'a> {
     /// The second half of a multi-rate cycle: only the pairs of two grains that take two steps
     /// of it (`fast`) are computed; the others keep the first half's records.
     pub only_fast: Option<&'a [bool]>,
+    /// Whether every frame is a circle (then so is every pair).
+    pub all_circles: bool,
 }
 
 /// Where the second grain of a pair is met: the centre of its image that meets the first, the
@@ -159,9 +161,10 @@ impl PairPass<'_> {
     /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
     #[inline(always)]
     fn all_circles(&self, p: usize) -> bool {
-        self.pairs[p..p + LANES]
-            .iter()
-            .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
+        self.all_circles
+            || self.pairs[p..p + LANES]
+                .iter()
+                .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
     }
 
     #[inline(always)]
@@ -679,6 +682,8 @@ mod tests {
                 step: 7,
                 periodic: periodic.then_some((cell, velocity_gradient)),
                 only_fast: None,
+                // Every frame here is a circle: told so, or found so block by block.
+                all_circles: seed % 2 == 1,
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)
