@@ -337,15 +337,22 @@ impl PairPass<'_> {
         records: &mut [PairContact],
         sums: &mut PairSums,
     ) {
-        // Only the branch vectors outlive the lanes' setting. A plain loop: `array::from_fn`
-        // of the second ends built them aside and copied them (a `memcpy` a block).
+        // Only the branch vectors outlive the lanes' setting (zero outside a periodic cell).
+        // Plain loops: `array::from_fn` of the second ends built them aside and copied them (a
+        // `memcpy` a block).
         let mut branches = [DVec2::ZERO; LANES];
-        for (lane, branch) in branches.iter_mut().enumerate() {
+        let mut ends = [(&self.frames[0], &self.frames[0]); LANES];
+        for (lane, end) in ends.iter_mut().enumerate() {
             let [i, j] = self.pairs[first + lane];
-            let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
-            let end = self.second_end(first + lane, fi, fj);
-            input.set_lane(lane, fi, fj, &end);
-            *branch = end.branch;
+            *end = (&self.frames[i as usize], &self.frames[j as usize]);
+        }
+        input.set_circles(&ends);
+        if self.periodic.is_some() {
+            for (lane, (branch, &(fi, fj))) in branches.iter_mut().zip(&ends).enumerate() {
+                let end = self.second_end(first + lane, fi, fj);
+                input.set_second_end(lane, &end);
+                *branch = end.branch;
+            }
         }
         disc_pair_forces_dispatch(input, &self.params.law, self.params.contact_damping, out);
         for (lane, &branch) in branches.iter().enumerate() {
@@ -386,26 +393,159 @@ pub struct DiscPairs<T> {
 impl DiscPairs<PairLanes> {
     /// Sets lane `lane` to the pair of circles `fi`, `fj`, the second met at `end`.
     #[inline(always)]
+    #[cfg(test)]
     fn set_lane(&mut self, lane: usize, fi: &Frame, fj: &Frame, end: &SecondEnd) {
-        let set = |v: &mut PairLanes, x: f64| v.0[lane] = x;
-        set(&mut self.center_i[0], fi.center.x);
-        set(&mut self.center_i[1], fi.center.y);
-        set(&mut self.radius_i, fi.bounding_radius);
-        set(&mut self.mass_i, fi.mass);
-        set(&mut self.velocity_i[0], fi.velocity.x);
-        set(&mut self.velocity_i[1], fi.velocity.y);
-        set(&mut self.omega_i, fi.omega);
-        set(&mut self.center_j[0], end.center.x);
-        set(&mut self.center_j[1], end.center.y);
-        set(&mut self.radius_j, fj.bounding_radius);
-        set(&mut self.mass_j, fj.mass);
-        set(&mut self.velocity_j[0], fj.velocity.x);
-        set(&mut self.velocity_j[1], fj.velocity.y);
-        set(&mut self.omega_j, fj.omega);
-        set(&mut self.affine_rate[0], end.affine_rate.x);
-        set(&mut self.affine_rate[1], end.affine_rate.y);
+        self.set_circle_lane(lane, false, fi);
+        self.set_circle_lane(lane, true, fj);
+        self.set_second_end(lane, end);
+    }
+
+    /// Sets every lane to its pair of circles (`ends`: the two frames), the second at its own
+    /// centre, leaving the affine rate as it is: what the kernel reads of a frame is its first
+    /// 56 bytes, moved four frames at a time with vector shuffles where the processor has AVX
+    /// (the same values, so the same bits). A pair at a periodic image takes
+    /// [`set_second_end`](Self::set_second_end) after.
+    #[inline(always)]
+    fn set_circles(&mut self, ends: &[(&Frame, &Frame); LANES]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor has AVX (tested just above).
+            unsafe { self.set_circles_avx(ends) };
+            return;
+        }
+        for (lane, (fi, fj)) in ends.iter().enumerate() {
+            self.set_circle_lane(lane, false, fi);
+            self.set_circle_lane(lane, true, fj);
+        }
+    }
+
+    /// The lanes of the pairs' first circles (`second` false) or second circles, in the order
+    /// of [`FRAME_LINE`]: centre x, centre y, radius, mass, velocity x, velocity y, spin.
+    #[inline(always)]
+    fn circle_lanes(&mut self, second: bool) -> [&mut PairLanes; 7] {
+        if second {
+            let [x, y] = &mut self.center_j;
+            let [vx, vy] = &mut self.velocity_j;
+            [
+                x,
+                y,
+                &mut self.radius_j,
+                &mut self.mass_j,
+                vx,
+                vy,
+                &mut self.omega_j,
+            ]
+        } else {
+            let [x, y] = &mut self.center_i;
+            let [vx, vy] = &mut self.velocity_i;
+            [
+                x,
+                y,
+                &mut self.radius_i,
+                &mut self.mass_i,
+                vx,
+                vy,
+                &mut self.omega_i,
+            ]
+        }
+    }
+
+    /// Lane `lane` of the first circles (`second` false) or second circles set to `frame`.
+    #[inline(always)]
+    fn set_circle_lane(&mut self, lane: usize, second: bool, frame: &Frame) {
+        let values = [
+            frame.center.x,
+            frame.center.y,
+            frame.bounding_radius,
+            frame.mass,
+            frame.velocity.x,
+            frame.velocity.y,
+            frame.omega,
+        ];
+        for (lanes, value) in self.circle_lanes(second).into_iter().zip(values) {
+            lanes.0[lane] = value;
+        }
+    }
+
+    /// The second circle of lane `lane` met at `end` (a periodic image), with the affine rate.
+    #[inline(always)]
+    fn set_second_end(&mut self, lane: usize, end: &SecondEnd) {
+        self.center_j[0].0[lane] = end.center.x;
+        self.center_j[1].0[lane] = end.center.y;
+        self.affine_rate[0].0[lane] = end.affine_rate.x;
+        self.affine_rate[1].0[lane] = end.affine_rate.y;
+    }
+
+    /// [`set_circles`](Self::set_circles) with AVX: for each circle of the pairs and each four
+    /// lanes, the four frames' (centre, radius, mass) loaded as four vectors and transposed,
+    /// their velocities as two-lane vectors interleaved, their spins gathered.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn set_circles_avx(&mut self, ends: &[(&Frame, &Frame); LANES]) {
+        use std::arch::x86_64::*;
+        for second in [false, true] {
+            for quad in 0..LANES / 4 {
+                let frame = |k: usize| {
+                    let (fi, fj) = ends[4 * quad + k];
+                    if second { fj } else { fi }
+                };
+                // SAFETY: a frame is aligned to 64 bytes and holds its centre, radius and mass
+                // in its first 32 (as `FRAME_LINE` asserts), its velocity in the next 16 and
+                // its spin after them; a lane vector is aligned to 32 bytes and four lanes from
+                // `4 quad` are within its eight.
+                unsafe {
+                    let first_half = |k: usize| _mm256_load_pd(&frame(k).center.x);
+                    let (a0, a1, a2, a3) =
+                        (first_half(0), first_half(1), first_half(2), first_half(3));
+                    let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
+                    let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
+                    let velocity = |k: usize| _mm_load_pd(&frame(k).velocity.x);
+                    let u0 =
+                        _mm256_insertf128_pd(_mm256_castpd128_pd256(velocity(0)), velocity(2), 1);
+                    let u1 =
+                        _mm256_insertf128_pd(_mm256_castpd128_pd256(velocity(1)), velocity(3), 1);
+                    let omega = _mm256_set_pd(
+                        frame(3).omega,
+                        frame(2).omega,
+                        frame(1).omega,
+                        frame(0).omega,
+                    );
+                    let values = [
+                        _mm256_permute2f128_pd(t0, t2, 0x20),
+                        _mm256_permute2f128_pd(t1, t3, 0x20),
+                        _mm256_permute2f128_pd(t0, t2, 0x31),
+                        _mm256_permute2f128_pd(t1, t3, 0x31),
+                        _mm256_unpacklo_pd(u0, u1),
+                        _mm256_unpackhi_pd(u0, u1),
+                        omega,
+                    ];
+                    for (lanes, value) in self.circle_lanes(second).into_iter().zip(values) {
+                        _mm256_store_pd(lanes.0.as_mut_ptr().add(4 * quad), value);
+                    }
+                }
+            }
+        }
     }
 }
+
+/// The byte offsets in a [`Frame`] of what a circle's lanes read, in the order of
+/// [`DiscPairs::circle_lanes`]: centre x and y, radius and mass in the first 32 bytes, then the velocity and
+/// the spin, which the vector loads of [`DiscPairs::set_circles`] rely on.
+const FRAME_LINE: [usize; 7] = [0, 8, 16, 24, 32, 40, 48];
+const _: () = {
+    use std::mem::offset_of;
+    let center = offset_of!(Frame, center);
+    let velocity = offset_of!(Frame, velocity);
+    assert!(center + offset_of!(DVec2, x) == FRAME_LINE[0]);
+    assert!(center + offset_of!(DVec2, y) == FRAME_LINE[1]);
+    assert!(offset_of!(Frame, bounding_radius) == FRAME_LINE[2]);
+    assert!(offset_of!(Frame, mass) == FRAME_LINE[3]);
+    assert!(velocity + offset_of!(DVec2, x) == FRAME_LINE[4]);
+    assert!(velocity + offset_of!(DVec2, y) == FRAME_LINE[5]);
+    assert!(offset_of!(Frame, omega) == FRAME_LINE[6]);
+    assert!(std::mem::align_of::<Frame>() >= 32);
+    assert!(std::mem::align_of::<PairLanes>() >= 32);
+};
 
 /// The contact of each lane's circles computed as if they met in the kernel's regular case;
 /// [`DiscPairForces::lane`] says, lane by lane, whether they do.
@@ -735,6 +875,31 @@ mod tests {
             if friction {
                 assert!(lane_sums.sliding > 0 && lane_sums.sliding < touching as u64);
             }
+        }
+    }
+
+    #[test]
+    fn the_frames_shuffled_into_lanes_are_the_frames_set_lane_by_lane() {
+        // Expectation: `set_circles` moves values and computes nothing: whatever instructions
+        // it takes (AVX shuffles here where the processor has them), every lane holds what
+        // setting the lanes one value at a time puts there.
+        let (frames, pairs) = circle_pairs(6);
+        let mut ends = [(&frames[0], &frames[0]); LANES];
+        for (end, &[i, j]) in ends.iter_mut().zip(&pairs[LANES..]) {
+            *end = (&frames[i as usize], &frames[j as usize]);
+        }
+        let mut shuffled = DiscPairs::<PairLanes>::default();
+        shuffled.set_circles(&ends);
+        let mut one_by_one = DiscPairs::<PairLanes>::default();
+        for (lane, (fi, fj)) in ends.iter().enumerate() {
+            one_by_one.set_circle_lane(lane, false, fi);
+            one_by_one.set_circle_lane(lane, true, fj);
+        }
+        assert_eq!(format!("{shuffled:?}"), format!("{one_by_one:?}"));
+        // Every lane was set (no value of the frames is zero).
+        for second in [false, true] {
+            let lanes = one_by_one.circle_lanes(second);
+            assert!(lanes.iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
         }
     }
 
