@@ -337,26 +337,25 @@ impl PairPass<'_> {
         records: &mut [PairContact],
         sums: &mut PairSums,
     ) {
-        // Only the branch vectors outlive the lanes' setting (zero outside a periodic cell).
-        // Plain loops: `array::from_fn` of the second ends built them aside and copied them (a
-        // `memcpy` a block).
-        let mut branches = [DVec2::ZERO; LANES];
+        // A plain loop: `array::from_fn` of the second ends built them aside and copied them
+        // (a `memcpy` a block).
         let mut ends = [(&self.frames[0], &self.frames[0]); LANES];
         for (lane, end) in ends.iter_mut().enumerate() {
             let [i, j] = self.pairs[first + lane];
             *end = (&self.frames[i as usize], &self.frames[j as usize]);
         }
         input.set_circles(&ends);
-        if self.periodic.is_some() {
-            for (lane, (branch, &(fi, fj))) in branches.iter_mut().zip(&ends).enumerate() {
-                let end = self.second_end(first + lane, fi, fj);
-                input.set_second_end(lane, &end);
-                *branch = end.branch;
+        // Only the branch vectors outlive the lanes' setting (zero outside a periodic cell).
+        let branches = match &self.periodic {
+            Some((cell, velocity_gradient)) => {
+                input.meet_images(cell, velocity_gradient, &self.images[first..first + LANES])
             }
-        }
+            None => Default::default(),
+        };
         disc_pair_forces_dispatch(input, &self.params.law, self.params.contact_damping, out);
-        for (lane, &branch) in branches.iter().enumerate() {
+        for lane in 0..LANES {
             let p = first + lane;
+            let branch = DVec2::new(branches[0].0[lane], branches[1].0[lane]);
             let (state, active, record) =
                 (&mut states[lane], &mut actives[lane], &mut records[lane]);
             let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
@@ -467,8 +466,42 @@ impl DiscPairs<PairLanes> {
         }
     }
 
+    /// In a periodic cell, moves each lane's second circle to its image `images[lane]` (the
+    /// one that meets the first), sets the affine rate `L d` of the branch vector d and returns
+    /// the branch vectors' lanes: the operations of [`PairPass::second_end`], lane by lane (the
+    /// shifts, zero or not, are added as there).
+    #[inline(always)]
+    fn meet_images(
+        &mut self,
+        cell: &PeriodicCell,
+        velocity_gradient: &DMat2,
+        images: &[[i64; 2]],
+    ) -> [PairLanes; 2] {
+        let mut shift = [PairLanes::default(); 2];
+        for (lane, &image) in images.iter().enumerate() {
+            let s = cell.image_shift(image);
+            (shift[0].0[lane], shift[1].0[lane]) = (s.x, s.y);
+        }
+        for (center, shift) in self.center_j.iter_mut().zip(shift) {
+            *center = *center + shift;
+        }
+        let branch = [
+            self.center_j[0] - self.center_i[0],
+            self.center_j[1] - self.center_i[1],
+        ];
+        // `L d` as glam's product of a matrix and a vector sums it.
+        let l = |entry: f64| PairLanes::splat(entry);
+        let m = velocity_gradient;
+        self.affine_rate = [
+            l(m.x_axis.x) * branch[0] + l(m.y_axis.x) * branch[1],
+            l(m.x_axis.y) * branch[0] + l(m.y_axis.y) * branch[1],
+        ];
+        branch
+    }
+
     /// The second circle of lane `lane` met at `end` (a periodic image), with the affine rate.
     #[inline(always)]
+    #[cfg(test)]
     fn set_second_end(&mut self, lane: usize, end: &SecondEnd) {
         self.center_j[0].0[lane] = end.center.x;
         self.center_j[1].0[lane] = end.center.y;
@@ -808,10 +841,20 @@ mod tests {
         ] {
             let params = parameters(friction);
             let (frames, pairs) = circle_pairs(seed);
-            // A periodic cell adds the branch vectors' affine rate and the cell stress's sum
-            // (every pair at image (0, 0)).
-            let images = vec![[0, 0]; if periodic { pairs.len() } else { 0 }];
+            // A periodic cell adds the branch vectors' affine rate and the cell stress's sum;
+            // one pair in three meets the image of its second grain across a side or a corner
+            // (the grain moved back by that image's shift: the same pair, give or take
+            // rounding).
             let cell = PeriodicCell::rectangle(DVec2::splat(-50.0), 100.0, 100.0).unwrap();
+            let mut frames = frames;
+            let mut images = Vec::new();
+            if periodic {
+                for (p, &[_, j]) in pairs.iter().enumerate() {
+                    let image = [[0, 0], [1, 0], [-1, 1]][p % 3];
+                    frames[j as usize].center -= cell.image_shift(image);
+                    images.push(image);
+                }
+            }
             let velocity_gradient = DMat2::from_cols_array(&[0.01, 0.002, -0.003, -0.02]);
             let pass = PairPass {
                 params: &params,
