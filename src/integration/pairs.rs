@@ -339,10 +339,10 @@ impl PairPass<'_> {
     ) {
         // A plain loop: `array::from_fn` of the second ends built them aside and copied them
         // (a `memcpy` a block).
-        let mut ends = [(&self.frames[0], &self.frames[0]); LANES];
-        for (lane, end) in ends.iter_mut().enumerate() {
-            let [i, j] = self.pairs[first + lane];
-            *end = (&self.frames[i as usize], &self.frames[j as usize]);
+        let frames = self.frames;
+        let mut ends = [(&frames[0], &frames[0]); LANES];
+        for (end, &[i, j]) in ends.iter_mut().zip(&self.pairs[first..first + LANES]) {
+            *end = (&frames[i as usize], &frames[j as usize]);
         }
         input.set_circles(&ends);
         // Only the branch vectors outlive the lanes' setting (zero outside a periodic cell).
