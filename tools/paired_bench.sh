@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Two builds timed at the same moment, one on each core, the cores swapped every round: on a
+# shared machine whose speed drifts by 20-30% within the hour, the ratio of two runs side by side
+# moves far less than either run does (issue #16). Prints each round's grain-steps per second of
+# both builds and their ratio (NEW / OLD), then the median ratio.
+#   usage: tools/paired_bench.sh OLD_SDEM NEW_SDEM ROUNDS BENCH_ARGS...
+#   e.g.   tools/paired_bench.sh /tmp/sdem_old target/release/sdem 8 \
+#            bench --grains 100000 --steps 300 --warmup 20 --threads 1 --model rigid
+# BENCH_ARGS are `sdem bench`'s (one thread each: the two runs share the machine's two cores).
+# Needs taskset (util-linux) and at least two cores.
+set -eu
+if [ $# -lt 4 ]; then
+  sed -n '2,10p' "$0"
+  exit 2
+fi
+old=$1 new=$2 rounds=$3
+shift 3
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+rate() { awk '/^grain-steps\/s:/ {print $2}' "$1"; }
+ratios=()
+for round in $(seq 1 "$rounds"); do
+  if [ $((round % 2)) = 1 ]; then old_core=0 new_core=1; else old_core=1 new_core=0; fi
+  taskset -c $old_core "$old" "$@" >"$work/old.txt" &
+  taskset -c $new_core "$new" "$@" >"$work/new.txt" &
+  wait
+  a=$(rate "$work/old.txt") b=$(rate "$work/new.txt")
+  ratio=$(python3 -c "print(f'{$b / $a:.4f}')")
+  ratios+=("$ratio")
+  echo "round $round: old $a, new $b grain-steps/s, new/old $ratio"
+done
+python3 -c "import statistics, sys; print(f'median new/old over $rounds rounds: {statistics.median(map(float, sys.argv[1:])):.4f}')" "${ratios[@]}"
