@@ -301,26 +301,30 @@ mod disc_pairs {
     use sdem::contact::law::{SecantLaw, damped_normal_force};
     use sdem::geometry::Overlap;
     use sdem::integration::pairs::{
-        DiscPairForces, DiscPairs, LANES, PairLanes, disc_pair_forces_dispatch,
+        DiscLanes, DiscPairForces, DiscPairs, LANES, PairLanes, disc_pair_forces_dispatch,
     };
     use std::hint::black_box;
 
     fn pairs() -> DiscPairs<PairLanes> {
         let lanes = |f: fn(usize) -> f64| PairLanes::from_fn(f);
         DiscPairs {
-            center_i: [lanes(|l| 0.03 * l as f64), lanes(|_| 0.0)],
-            radius_i: lanes(|_| 0.012),
-            mass_i: lanes(|_| 4.5e-4),
-            velocity_i: [lanes(|l| 1e-3 * l as f64), lanes(|_| 0.0)],
-            omega_i: lanes(|_| 0.1),
-            center_j: [
-                lanes(|l| 0.03 * l as f64 + 0.0238 - 1e-4 * l as f64),
-                lanes(|l| 1e-3 * l as f64),
-            ],
-            radius_j: lanes(|_| 0.0121),
-            mass_j: lanes(|_| 4.6e-4),
-            velocity_j: [lanes(|_| 0.0), lanes(|l| -1e-3 * l as f64)],
-            omega_j: lanes(|_| -0.2),
+            first: DiscLanes {
+                center: [lanes(|l| 0.03 * l as f64), lanes(|_| 0.0)],
+                radius: lanes(|_| 0.012),
+                mass: lanes(|_| 4.5e-4),
+                velocity: [lanes(|l| 1e-3 * l as f64), lanes(|_| 0.0)],
+                omega: lanes(|_| 0.1),
+            },
+            second: DiscLanes {
+                center: [
+                    lanes(|l| 0.03 * l as f64 + 0.0238 - 1e-4 * l as f64),
+                    lanes(|l| 1e-3 * l as f64),
+                ],
+                radius: lanes(|_| 0.0121),
+                mass: lanes(|_| 4.6e-4),
+                velocity: [lanes(|_| 0.0), lanes(|l| -1e-3 * l as f64)],
+                omega: lanes(|_| -0.2),
+            },
             affine_rate: [lanes(|_| 0.0), lanes(|_| 0.0)],
         }
     }
@@ -345,20 +349,24 @@ mod disc_pairs {
                 for (l, force) in forces.iter_mut().enumerate() {
                     let at = |v: &PairLanes| v.0[l];
                     let (ci, cj) = (
-                        DVec2::new(at(&input.center_i[0]), at(&input.center_i[1])),
-                        DVec2::new(at(&input.center_j[0]), at(&input.center_j[1])),
+                        DVec2::new(at(&input.first.center[0]), at(&input.first.center[1])),
+                        DVec2::new(at(&input.second.center[0]), at(&input.second.center[1])),
                     );
                     let contact = sdem::geometry::circle::disc_disc(
                         ci,
-                        at(&input.radius_i),
+                        at(&input.first.radius),
                         cj,
-                        at(&input.radius_j),
+                        at(&input.second.radius),
                     );
                     if let Overlap::Contact(c) = contact {
                         let r = law.response(c.length, c.normal_gap).unwrap();
-                        let vi = DVec2::new(at(&input.velocity_i[0]), at(&input.velocity_i[1]));
-                        let vj = DVec2::new(at(&input.velocity_j[0]), at(&input.velocity_j[1]));
-                        let (mi, mj) = (at(&input.mass_i), at(&input.mass_j));
+                        let vi =
+                            DVec2::new(at(&input.first.velocity[0]), at(&input.first.velocity[1]));
+                        let vj = DVec2::new(
+                            at(&input.second.velocity[0]),
+                            at(&input.second.velocity[1]),
+                        );
+                        let (mi, mj) = (at(&input.first.mass), at(&input.second.mass));
                         let gap_rate = (vj - vi).dot(c.normal);
                         *force = damped_normal_force(
                             r.force,

@@ -358,7 +358,7 @@ impl PairPass<'_> {
             let branch = DVec2::new(branches[0].0[lane], branches[1].0[lane]);
             let (state, active, record) =
                 (&mut states[lane], &mut actives[lane], &mut records[lane]);
-            let radius = [input.radius_i.0[lane], input.radius_j.0[lane]];
+            let radius = [input.first.radius.0[lane], input.second.radius.0[lane]];
             let touch = match out.lane(lane, &radius) {
                 LaneCase::Irregular => {
                     self.one_pair::<FRICTIONAL>(p, state, active, record, sums);
@@ -372,21 +372,59 @@ impl PairPass<'_> {
     }
 }
 
-/// What the kernel needs of pairs of circles: lanes of the two circles' centres, radii, masses,
-/// velocities and spins, and the affine field's `L d`.
+/// What the kernel needs of pairs of circles: lanes of the pairs' first circles and second
+/// circles, and the affine field's `L d`.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct DiscPairs<T> {
-    pub center_i: [T; 2],
-    pub radius_i: T,
-    pub mass_i: T,
-    pub velocity_i: [T; 2],
-    pub omega_i: T,
-    pub center_j: [T; 2],
-    pub radius_j: T,
-    pub mass_j: T,
-    pub velocity_j: [T; 2],
-    pub omega_j: T,
+    pub first: DiscLanes<T>,
+    pub second: DiscLanes<T>,
     pub affine_rate: [T; 2],
+}
+
+/// One circle of each pair: lanes of centres, radii, masses, velocities and spins.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DiscLanes<T> {
+    pub center: [T; 2],
+    pub radius: T,
+    pub mass: T,
+    pub velocity: [T; 2],
+    pub omega: T,
+}
+
+impl DiscLanes<PairLanes> {
+    /// The lanes in the order of [`FRAME_LINE`]: centre x, centre y, radius, mass, velocity x,
+    /// velocity y, spin.
+    #[inline(always)]
+    fn in_frame_order(&mut self) -> [&mut PairLanes; 7] {
+        let [x, y] = &mut self.center;
+        let [vx, vy] = &mut self.velocity;
+        [
+            x,
+            y,
+            &mut self.radius,
+            &mut self.mass,
+            vx,
+            vy,
+            &mut self.omega,
+        ]
+    }
+
+    /// Lane `lane` set to the circle of `frame`.
+    #[inline(always)]
+    fn set_lane(&mut self, lane: usize, frame: &Frame) {
+        let values = [
+            frame.center.x,
+            frame.center.y,
+            frame.bounding_radius,
+            frame.mass,
+            frame.velocity.x,
+            frame.velocity.y,
+            frame.omega,
+        ];
+        for (lanes, value) in self.in_frame_order().into_iter().zip(values) {
+            lanes.0[lane] = value;
+        }
+    }
 }
 
 impl DiscPairs<PairLanes> {
@@ -394,8 +432,8 @@ impl DiscPairs<PairLanes> {
     #[inline(always)]
     #[cfg(test)]
     fn set_lane(&mut self, lane: usize, fi: &Frame, fj: &Frame, end: &SecondEnd) {
-        self.set_circle_lane(lane, false, fi);
-        self.set_circle_lane(lane, true, fj);
+        self.first.set_lane(lane, fi);
+        self.second.set_lane(lane, fj);
         self.set_second_end(lane, end);
     }
 
@@ -413,56 +451,8 @@ impl DiscPairs<PairLanes> {
             return;
         }
         for (lane, (fi, fj)) in ends.iter().enumerate() {
-            self.set_circle_lane(lane, false, fi);
-            self.set_circle_lane(lane, true, fj);
-        }
-    }
-
-    /// The lanes of the pairs' first circles (`second` false) or second circles, in the order
-    /// of [`FRAME_LINE`]: centre x, centre y, radius, mass, velocity x, velocity y, spin.
-    #[inline(always)]
-    fn circle_lanes(&mut self, second: bool) -> [&mut PairLanes; 7] {
-        if second {
-            let [x, y] = &mut self.center_j;
-            let [vx, vy] = &mut self.velocity_j;
-            [
-                x,
-                y,
-                &mut self.radius_j,
-                &mut self.mass_j,
-                vx,
-                vy,
-                &mut self.omega_j,
-            ]
-        } else {
-            let [x, y] = &mut self.center_i;
-            let [vx, vy] = &mut self.velocity_i;
-            [
-                x,
-                y,
-                &mut self.radius_i,
-                &mut self.mass_i,
-                vx,
-                vy,
-                &mut self.omega_i,
-            ]
-        }
-    }
-
-    /// Lane `lane` of the first circles (`second` false) or second circles set to `frame`.
-    #[inline(always)]
-    fn set_circle_lane(&mut self, lane: usize, second: bool, frame: &Frame) {
-        let values = [
-            frame.center.x,
-            frame.center.y,
-            frame.bounding_radius,
-            frame.mass,
-            frame.velocity.x,
-            frame.velocity.y,
-            frame.omega,
-        ];
-        for (lanes, value) in self.circle_lanes(second).into_iter().zip(values) {
-            lanes.0[lane] = value;
+            self.first.set_lane(lane, fi);
+            self.second.set_lane(lane, fj);
         }
     }
 
@@ -482,12 +472,12 @@ impl DiscPairs<PairLanes> {
             let s = cell.image_shift(image);
             (shift[0].0[lane], shift[1].0[lane]) = (s.x, s.y);
         }
-        for (center, shift) in self.center_j.iter_mut().zip(shift) {
+        for (center, shift) in self.second.center.iter_mut().zip(shift) {
             *center = *center + shift;
         }
         let branch = [
-            self.center_j[0] - self.center_i[0],
-            self.center_j[1] - self.center_i[1],
+            self.second.center[0] - self.first.center[0],
+            self.second.center[1] - self.first.center[1],
         ];
         // `L d` as glam's product of a matrix and a vector sums it.
         let l = |entry: f64| PairLanes::splat(entry);
@@ -503,8 +493,8 @@ impl DiscPairs<PairLanes> {
     #[inline(always)]
     #[cfg(test)]
     fn set_second_end(&mut self, lane: usize, end: &SecondEnd) {
-        self.center_j[0].0[lane] = end.center.x;
-        self.center_j[1].0[lane] = end.center.y;
+        self.second.center[0].0[lane] = end.center.x;
+        self.second.center[1].0[lane] = end.center.y;
         self.affine_rate[0].0[lane] = end.affine_rate.x;
         self.affine_rate[1].0[lane] = end.affine_rate.y;
     }
@@ -516,7 +506,7 @@ impl DiscPairs<PairLanes> {
     #[target_feature(enable = "avx")]
     fn set_circles_avx(&mut self, ends: &[(&Frame, &Frame); LANES]) {
         use std::arch::x86_64::*;
-        for second in [false, true] {
+        for (second, circles) in [(false, &mut self.first), (true, &mut self.second)] {
             for quad in 0..LANES / 4 {
                 let frame = |k: usize| {
                     let (fi, fj) = ends[4 * quad + k];
@@ -552,7 +542,7 @@ impl DiscPairs<PairLanes> {
                         _mm256_unpackhi_pd(u0, u1),
                         omega,
                     ];
-                    for (lanes, value) in self.circle_lanes(second).into_iter().zip(values) {
+                    for (lanes, value) in circles.in_frame_order().into_iter().zip(values) {
                         _mm256_store_pd(lanes.0.as_mut_ptr().add(4 * quad), value);
                     }
                 }
@@ -562,7 +552,7 @@ impl DiscPairs<PairLanes> {
 }
 
 /// The byte offsets in a [`Frame`] of what a circle's lanes read, in the order of
-/// [`DiscPairs::circle_lanes`]: centre x and y, radius and mass in the first 32 bytes, then the velocity and
+/// [`DiscLanes::in_frame_order`]: centre x and y, radius and mass in the first 32 bytes, then the velocity and
 /// the spin, which the vector loads of [`DiscPairs::set_circles`] rely on.
 const FRAME_LINE: [usize; 7] = [0, 8, 16, 24, 32, 40, 48];
 const _: () = {
@@ -662,8 +652,8 @@ pub fn disc_pair_forces<T: Real>(
     damping_ratio: f64,
     out: &mut DiscPairForces<T>,
 ) {
-    let (ci, cj) = (input.center_i, input.center_j);
-    let (radius_i, radius_j) = (input.radius_i, input.radius_j);
+    let (ci, cj) = (input.first.center, input.second.center);
+    let (radius_i, radius_j) = (input.first.radius, input.second.radius);
     let branch = [cj[0] - ci[0], cj[1] - ci[1]];
     let distance_squared = branch[0] * branch[0] + branch[1] * branch[1];
     let reach = radius_i + radius_j;
@@ -687,13 +677,13 @@ pub fn disc_pair_forces<T: Real>(
     let stiffness = law.stiffness(length, denominator);
     let elastic = stiffness * normal_gap;
     let velocity_j = circle_velocity_at(
-        input.velocity_j,
-        input.omega_j,
+        input.second.velocity,
+        input.second.omega,
         [point[0] - cj[0], point[1] - cj[1]],
     );
     let velocity_i = circle_velocity_at(
-        input.velocity_i,
-        input.omega_i,
+        input.first.velocity,
+        input.first.omega,
         [point[0] - ci[0], point[1] - ci[1]],
     );
     let relative_velocity = [
@@ -701,7 +691,8 @@ pub fn disc_pair_forces<T: Real>(
         velocity_j[1] - velocity_i[1] + input.affine_rate[1],
     ];
     let gap_rate = relative_velocity[0] * normal[0] + relative_velocity[1] * normal[1];
-    let effective_mass = input.mass_i * input.mass_j / (input.mass_i + input.mass_j);
+    let (mass_i, mass_j) = (input.first.mass, input.second.mass);
+    let effective_mass = mass_i * mass_j / (mass_i + mass_j);
     let force = damped_normal_force(
         elastic,
         stiffness,
@@ -935,13 +926,13 @@ mod tests {
         shuffled.set_circles(&ends);
         let mut one_by_one = DiscPairs::<PairLanes>::default();
         for (lane, (fi, fj)) in ends.iter().enumerate() {
-            one_by_one.set_circle_lane(lane, false, fi);
-            one_by_one.set_circle_lane(lane, true, fj);
+            one_by_one.first.set_lane(lane, fi);
+            one_by_one.second.set_lane(lane, fj);
         }
         assert_eq!(format!("{shuffled:?}"), format!("{one_by_one:?}"));
         // Every lane was set (no value of the frames is zero).
-        for second in [false, true] {
-            let lanes = one_by_one.circle_lanes(second);
+        for circles in [&mut one_by_one.first, &mut one_by_one.second] {
+            let lanes = circles.in_frame_order();
             assert!(lanes.iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
         }
     }
