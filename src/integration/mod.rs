@@ -45,7 +45,7 @@ use std::time::Instant;
 
 /// Grains per chunk of the parallel passes: fixed, so that every reduction is the same sum in
 /// the same order for any number of threads. The pair pass's chunks follow them (see
-/// [`pair_chunks_by_first_grain`]).
+/// [`pair_chunk_ends`]).
 pub const GRAIN_CHUNK: usize = 256;
 /// Pairs per chunk of the passes over the pair list that sum nothing (the rebuild's merge).
 pub const PAIR_CHUNK: usize = 512;

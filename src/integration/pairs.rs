@@ -440,8 +440,8 @@ impl DiscPairs<PairLanes> {
     /// Sets every lane to its pair of circles (`ends`: the two frames), the second at its own
     /// centre, leaving the affine rate as it is: what the kernel reads of a frame is its first
     /// 56 bytes, moved four frames at a time with vector shuffles where the processor has AVX
-    /// (the same values, so the same bits). A pair at a periodic image takes
-    /// [`set_second_end`](Self::set_second_end) after.
+    /// (the same values, so the same bits). In a periodic cell,
+    /// [`meet_images`](Self::meet_images) follows.
     #[inline(always)]
     fn set_circles(&mut self, ends: &[(&Frame, &Frame); LANES]) {
         #[cfg(target_arch = "x86_64")]
@@ -512,17 +512,20 @@ impl DiscPairs<PairLanes> {
                     let (fi, fj) = ends[4 * quad + k];
                     if second { fj } else { fi }
                 };
+                // The loads read through a pointer to the whole frame (a pointer to one field
+                // may not read past it).
+                let line = |k: usize| (frame(k) as *const Frame).cast::<f64>();
                 // SAFETY: a frame is aligned to 64 bytes and holds its centre, radius and mass
-                // in its first 32 (as `FRAME_LINE` asserts), its velocity in the next 16 and
-                // its spin after them; a lane vector is aligned to 32 bytes and four lanes from
-                // `4 quad` are within its eight.
+                // in its first 32 bytes and its velocity in the next 16 (as `FRAME_LINE`
+                // asserts), all initialised f64s; a lane vector is aligned to 32 bytes and the
+                // four lanes from `4 quad` are within its eight.
                 unsafe {
-                    let first_half = |k: usize| _mm256_load_pd(&frame(k).center.x);
+                    let first_half = |k: usize| _mm256_load_pd(line(k));
                     let (a0, a1, a2, a3) =
                         (first_half(0), first_half(1), first_half(2), first_half(3));
                     let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
                     let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
-                    let velocity = |k: usize| _mm_load_pd(&frame(k).velocity.x);
+                    let velocity = |k: usize| _mm_load_pd(line(k).add(FRAME_LINE[4] / 8));
                     let u0 =
                         _mm256_insertf128_pd(_mm256_castpd128_pd256(velocity(0)), velocity(2), 1);
                     let u1 =
@@ -552,8 +555,8 @@ impl DiscPairs<PairLanes> {
 }
 
 /// The byte offsets in a [`Frame`] of what a circle's lanes read, in the order of
-/// [`DiscLanes::in_frame_order`]: centre x and y, radius and mass in the first 32 bytes, then the velocity and
-/// the spin, which the vector loads of [`DiscPairs::set_circles`] rely on.
+/// [`DiscLanes::in_frame_order`]: centre x and y, radius and mass in the first 32 bytes, then
+/// the velocity and the spin, which the vector loads of [`DiscPairs::set_circles`] rely on.
 const FRAME_LINE: [usize; 7] = [0, 8, 16, 24, 32, 40, 48];
 const _: () = {
     use std::mem::offset_of;
