@@ -428,8 +428,8 @@ pub struct World {
     frames_current: bool,
     /// Whether every frame is a circle (see [`Frame::circle`]), kept with the frames: then
     /// the pair pass takes every block of pairs to the circle lanes without reading the two
-    /// frames' flags of each pair first (issue #16: 20 instructions a grain-step of rigid
-    /// discs).
+    /// frames' flags of each pair first (issue #16: 63 instructions a grain-step of rigid
+    /// discs under callgrind).
     frames_all_circles: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
@@ -817,7 +817,7 @@ impl World {
                 .periodic
                 .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
             only_fast: only_fast.then_some(self.fast.as_slice()),
-            all_circles: self.frames_all_circles,
+            every_frame_a_circle: self.frames_all_circles,
         };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,

@@ -50,7 +50,7 @@ pub(super) struct PairPass<'a> {
     /// of it (`fast`) are computed; the others keep the first half's records.
     pub only_fast: Option<&'a [bool]>,
     /// Whether every frame is a circle (then so is every pair).
-    pub all_circles: bool,
+    pub every_frame_a_circle: bool,
 }
 
 /// Where the second grain of a pair is met: the centre of its image that meets the first, the
@@ -161,7 +161,7 @@ impl PairPass<'_> {
     /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
     #[inline(always)]
     fn all_circles(&self, p: usize) -> bool {
-        self.all_circles
+        self.every_frame_a_circle
             || self.pairs[p..p + LANES]
                 .iter()
                 .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
@@ -177,7 +177,7 @@ impl PairPass<'_> {
         if let Some((cell, velocity_gradient)) = &self.periodic {
             end.center += cell.image_shift(self.images[p]);
             end.branch = end.center - first.center;
-            end.affine_rate = *velocity_gradient * end.branch;
+            end.affine_rate = affine_rate(velocity_gradient, end.branch.into()).into();
         }
         end
     }
@@ -337,8 +337,8 @@ impl PairPass<'_> {
         records: &mut [PairContact],
         sums: &mut PairSums,
     ) {
-        // A plain loop: `array::from_fn` of the second ends built them aside and copied them
-        // (a `memcpy` a block).
+        // A plain loop: `array::from_fn` built such arrays aside and copied them (a `memcpy` a
+        // block).
         let frames = self.frames;
         let mut ends = [(&frames[0], &frames[0]); LANES];
         for (end, &[i, j]) in ends.iter_mut().zip(&self.pairs[first..first + LANES]) {
@@ -370,6 +370,17 @@ impl PairPass<'_> {
             self.record::<FRICTIONAL>(touch, state.hint, branch, state, active, record, sums);
         }
     }
+}
+
+/// The affine field's velocity `L d` at branch vector `d` (`velocity_gradient` L), summed as
+/// glam's product of a matrix and a vector; for one pair or for lanes of pairs.
+#[inline(always)]
+fn affine_rate<T: Real>(velocity_gradient: &DMat2, branch: [T; 2]) -> [T; 2] {
+    let (l, m) = (T::splat, velocity_gradient);
+    [
+        l(m.x_axis.x) * branch[0] + l(m.y_axis.x) * branch[1],
+        l(m.x_axis.y) * branch[0] + l(m.y_axis.y) * branch[1],
+    ]
 }
 
 /// What the kernel needs of pairs of circles: lanes of the pairs' first circles and second
@@ -479,13 +490,7 @@ impl DiscPairs<PairLanes> {
             self.second.center[0] - self.first.center[0],
             self.second.center[1] - self.first.center[1],
         ];
-        // `L d` as glam's product of a matrix and a vector sums it.
-        let l = |entry: f64| PairLanes::splat(entry);
-        let m = velocity_gradient;
-        self.affine_rate = [
-            l(m.x_axis.x) * branch[0] + l(m.y_axis.x) * branch[1],
-            l(m.x_axis.y) * branch[0] + l(m.y_axis.y) * branch[1],
-        ];
+        self.affine_rate = affine_rate(velocity_gradient, branch);
         branch
     }
 
@@ -860,7 +865,7 @@ mod tests {
                 periodic: periodic.then_some((cell, velocity_gradient)),
                 only_fast: None,
                 // Every frame here is a circle: told so, or found so block by block.
-                all_circles: seed % 2 == 1,
+                every_frame_a_circle: seed % 2 == 1,
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)
@@ -937,6 +942,23 @@ mod tests {
         for circles in [&mut one_by_one.first, &mut one_by_one.second] {
             let lanes = circles.in_frame_order();
             assert!(lanes.iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
+        }
+    }
+
+    #[test]
+    fn the_affine_rate_is_glams_product_bit_for_bit_on_one_pair_and_on_lanes() {
+        // Expectation: `L d` is the matrix-vector product glam computes (the one-pair path's
+        // before it was shared with the lanes), lane by lane the same bits.
+        let l = DMat2::from_cols_array(&[0.01, 0.002, -0.003, -0.02]);
+        let branches = PairLanes::from_fn(|k| 0.37 * k as f64 - 1.1);
+        let other = PairLanes::from_fn(|k| 1e-3 / (k as f64 + 0.3));
+        let lanes = affine_rate(&l, [branches, other]);
+        for k in 0..LANES {
+            let d = DVec2::new(branches.0[k], other.0[k]);
+            let expected = l * d;
+            let one: [f64; 2] = affine_rate(&l, d.into());
+            assert_eq!(one.map(f64::to_bits), expected.to_array().map(f64::to_bits));
+            assert_eq!([lanes[0].0[k], lanes[1].0[k]], one);
         }
     }
 
