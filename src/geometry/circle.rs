@@ -40,7 +40,7 @@ pub fn chord_segment_area(radius: f64, distance: f64, half_chord: f64) -> f64 {
 /// series of [`shallow_segment_area`].
 #[inline(always)]
 pub fn shallow_cap(distance: f64, s: f64) -> bool {
-    distance > 0.0 && s <= 0.3
+    (distance > 0.0) & (s <= 0.3)
 }
 
 /// The series branch of [`chord_segment_area`] at `s = sin theta = half_chord / radius`, for a

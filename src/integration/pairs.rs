@@ -353,6 +353,11 @@ impl PairPass<'_> {
             None => Default::default(),
         };
         disc_pair_forces_dispatch(input, &self.params.law, self.params.contact_damping, out);
+        let radius = [&input.first.radius, &input.second.radius];
+        if !FRICTIONAL && let Some(contact) = out.contacts_if_regular(radius) {
+            self.record_regular_block(out, &contact, &branches, states, actives, records, sums);
+            return;
+        }
         for lane in 0..LANES {
             let p = first + lane;
             let branch = DVec2::new(branches[0].0[lane], branches[1].0[lane]);
@@ -370,6 +375,66 @@ impl PairPass<'_> {
             self.record::<FRICTIONAL>(touch, state.hint, branch, state, active, record, sums);
         }
     }
+
+    /// A frictionless block whose lanes are each apart or a contact in the kernel's regular
+    /// case (`contact`): what [`record`](Self::record) writes for each lane, without the cases
+    /// of [`DiscPairForces::lane`]. A regular contact is never capped and has no tangential
+    /// force, and a pair of circles keeps its hint.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn record_regular_block(
+        &self,
+        out: &DiscPairForces<PairLanes>,
+        contact: &[bool; LANES],
+        branches: &[PairLanes; 2],
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+        sums: &mut PairSums,
+    ) {
+        let frictionless = TangentialResponse::default();
+        let open = PairState::default();
+        let (states, actives, records) = (
+            &mut states[..LANES],
+            &mut actives[..LANES],
+            &mut records[..LANES],
+        );
+        actives.copy_from_slice(contact);
+        let periodic = self.periodic.is_some();
+        for lane in 0..LANES {
+            let at = |v: &PairLanes| v.0[lane];
+            let state = &mut states[lane];
+            if !contact[lane] {
+                state.tangential_history = open.tangential_history;
+                state.contact_length = open.contact_length;
+                continue;
+            }
+            let pair = |v: &[PairLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
+            records[lane] = PairContact {
+                normal: pair(&out.normal),
+                force: at(&out.force),
+                tangential_force: frictionless.force,
+                point: pair(&out.point),
+                cap_area_first: at(&out.cap_area[0]),
+                cap_area_second: at(&out.cap_area[1]),
+            };
+            state.tangential_history = frictionless.history;
+            state.contact_length = chord_length(at(&out.half_chord));
+            if periodic {
+                let branch = pair(branches);
+                let share = symmetric_dyad(records[lane].normal_force_on_first(), branch);
+                for (sum, x) in sums.moment.iter_mut().zip(share) {
+                    *sum += x;
+                }
+            }
+        }
+    }
+}
+
+/// The contact length `L_c` of a chord of half length `half_chord`.
+#[inline(always)]
+fn chord_length(half_chord: f64) -> f64 {
+    2.0 * half_chord
 }
 
 /// The affine field's velocity `L d` at branch vector `d` (`velocity_gradient` L), summed as
@@ -616,16 +681,10 @@ impl DiscPairForces<PairLanes> {
     #[inline(always)]
     fn lane(&self, lane: usize, radius: &[f64; 2]) -> LaneCase {
         let at = |v: &PairLanes| v.0[lane];
-        let reach = at(&self.reach);
-        if discs_apart(at(&self.distance_squared), reach) {
+        if discs_apart(at(&self.distance_squared), at(&self.reach)) {
             return LaneCase::Separate;
         }
-        let regular = !disc_swallowed(at(&self.distance), radius[0], radius[1])
-            && !degenerate_chord(at(&self.half_chord), reach)
-            && shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
-            && shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
-            && SecantLaw::in_domain(at(&self.denominator), at(&self.floor));
-        if !regular {
+        if !self.regular(lane, radius) {
             return LaneCase::Irregular;
         }
         let pair = |v: &[PairLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
@@ -633,7 +692,7 @@ impl DiscPairForces<PairLanes> {
             geometry: ContactGeometry {
                 point: pair(&self.point),
                 normal: pair(&self.normal),
-                length: 2.0 * at(&self.half_chord),
+                length: chord_length(at(&self.half_chord)),
                 cap_area_i: at(&self.cap_area[0]),
                 cap_area_j: at(&self.cap_area[1]),
                 normal_gap: at(&self.normal_gap),
@@ -644,6 +703,54 @@ impl DiscPairForces<PairLanes> {
             relative_velocity: pair(&self.relative_velocity),
             effective_mass: at(&self.effective_mass),
         })
+    }
+
+    /// Whether lane `lane`'s circles, if they overlap, meet in the kernel's regular case.
+    #[inline(always)]
+    fn regular(&self, lane: usize, radius: &[f64; 2]) -> bool {
+        // `&`, not `&&`: the tests have no effects, and without branches they run on whole
+        // vectors in `contacts_if_regular`.
+        let at = |v: &PairLanes| v.0[lane];
+        !disc_swallowed(at(&self.distance), radius[0], radius[1])
+            & !degenerate_chord(at(&self.half_chord), at(&self.reach))
+            & shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
+            & shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
+            & SecantLaw::in_domain(at(&self.denominator), at(&self.floor))
+    }
+
+    /// Which lanes are contacts, when [`lane`](Self::lane) is apart or a contact for every
+    /// lane (`radius`: the lanes of the first circles' radii and of the second's); None when a
+    /// lane is irregular. The lanes are tested without branches, so that the tests can run on
+    /// whole vectors.
+    #[inline(always)]
+    fn contacts_if_regular(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor has AVX (tested just above).
+            return unsafe { self.contacts_if_regular_avx(radius) };
+        }
+        self.contacts_if_regular_in(radius)
+    }
+
+    /// [`contacts_if_regular`](Self::contacts_if_regular) compiled for AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn contacts_if_regular_avx(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        self.contacts_if_regular_in(radius)
+    }
+
+    #[inline(always)]
+    fn contacts_if_regular_in(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        let mut contact = [false; LANES];
+        let mut irregular = false;
+        for (lane, contact) in contact.iter_mut().enumerate() {
+            let at = |v: &PairLanes| v.0[lane];
+            let apart = discs_apart(at(&self.distance_squared), at(&self.reach));
+            let regular = self.regular(lane, &[radius[0].0[lane], radius[1].0[lane]]);
+            *contact = !apart;
+            irregular |= !apart & !regular;
+        }
+        (!irregular).then_some(contact)
     }
 }
 
@@ -792,11 +899,12 @@ mod tests {
                 &mut random,
             );
             let mut second = grain(DVec2::ZERO, &mut random);
-            // Most blocks hold contacts only; every third holds one of each kind.
-            let separation = if (k / LANES) % 3 == 0 {
-                separations[k % separations.len()]
-            } else {
-                random(0.97, 0.999)
+            // Most blocks hold contacts only; every third holds one of each kind, and each
+            // block after it contacts and pairs apart (a block without irregular lanes).
+            let separation = match (k / LANES) % 3 {
+                0 => separations[k % separations.len()],
+                1 if k % 3 == 0 => 1.2,
+                _ => random(0.97, 0.999),
             };
             let reach = first.bounding_radius + second.bounding_radius;
             let angle = random(0.0, std::f64::consts::TAU);
@@ -828,7 +936,8 @@ mod tests {
     #[test]
     fn lanes_of_circle_pairs_give_the_one_pair_paths_bits() {
         // Expectation: the lane kernel is the one-pair path's sequence of operations, and a
-        // lane outside its regular case is handed to that path: every record, state, flag and
+        // lane outside its regular case is handed to that path; a frictionless block without
+        // such a lane is recorded without the per-lane cases: every record, state, flag and
         // sum (the first failure included) is the same, bit for bit, signed zeros included.
         let contours = Contours::new(1.0);
         for (seed, friction, periodic) in [
