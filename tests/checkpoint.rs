@@ -128,6 +128,10 @@ fn f64_round_trips_bit_exactly() {
         grains: grains.clone(),
         walls: world.walls.clone(),
         totals: world.totals,
+        kinetic: sdem::integration::KineticTotals {
+            energy: -0.0,
+            stress: [odd[0], 5e-324, -1.5],
+        },
         program: sdem::boundary::loading::LoadingProgram::new(
             scenario.loading.clone(),
             &world.walls,
@@ -149,6 +153,11 @@ fn f64_round_trips_bit_exactly() {
     assert_eq!(grain_bits(&back.grains), grain_bits(&grains));
     assert_eq!(grain_bits(&back.runner.last_good), grain_bits(&grains));
     assert_eq!(back.time.to_bits(), (-0.0f64).to_bits());
+    assert_eq!(back.kinetic.energy.to_bits(), (-0.0f64).to_bits());
+    assert_eq!(
+        back.kinetic.stress.map(f64::to_bits),
+        c.kinetic.stress.map(f64::to_bits)
+    );
     assert_eq!(
         back.runner.isotropic_curve[0].0.to_bits(),
         (-0.0f64).to_bits()
@@ -503,6 +512,7 @@ fn fuzzed_scenarios_and_checkpoints_never_panic() {
         grains: world.grains()[..3].to_vec(),
         walls: world.walls.clone(),
         totals: world.totals,
+        kinetic: world.kinetic(),
         program: sdem::boundary::loading::LoadingProgram::new(small.loading.clone(), &world.walls),
         runner: RunnerState {
             confirmed_jamming: Some(sdem::run::Jamming {

@@ -6,7 +6,7 @@
 use super::{
     BoxCarry, ChunkSums, Frame, GrainStress, Instability, MAX_WALLS, PairContact, Parameters,
 };
-use crate::boundary::periodic::{CellMotion, PeriodicCell, symmetric_dyad};
+use crate::boundary::periodic::{CellMotion, PeriodicCell};
 use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
@@ -247,14 +247,6 @@ impl GrainPass<'_> {
             if tallied {
                 sums.totals.level_counts[level.level.index()] += 1;
                 sums.totals.grain_area += update.area;
-                sums.totals.kinetic_energy += update.kinetic_energy;
-                if self.cell.is_some() {
-                    let m = grain.mass(params.material.density);
-                    let flux = symmetric_dyad(m * grain.velocity, grain.velocity);
-                    for (sum, x) in sums.momentum_flux.iter_mut().zip(flux) {
-                        *sum += x;
-                    }
-                }
                 sums.totals.elastic_energy += update.elastic_energy;
                 sums.contact_ends += load.contacts as u64;
             }
@@ -412,8 +404,6 @@ struct GrainUpdate {
     stress: GrainStress,
     area: f64,
     elastic_energy: f64,
-    /// After the update.
-    kinetic_energy: f64,
 }
 
 /// Stresses, accelerations and the symplectic Euler update of one grain over `dt` (SPEC
@@ -543,7 +533,6 @@ fn advance_grain(
         stress,
         area: current_area,
         elastic_energy,
-        kinetic_energy: grain.kinetic_energy_of_mass(mass, params.deformation_mass_scale),
     }
 }
 

@@ -29,7 +29,7 @@ pub mod parameters;
 pub use instability::Instability;
 pub use parameters::Parameters;
 
-use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell};
+use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::contour::QUARTER_TURN;
@@ -277,7 +277,6 @@ pub struct StepTotals {
     pub wall_force: [f64; MAX_WALLS],
     /// Sum of current grain areas `pi R^2 (1+eps1)(1+eps2) - sum S_j`.
     pub grain_area: f64,
-    pub kinetic_energy: f64,
     pub elastic_energy: f64,
     /// Active grain–grain contacts (each counted once).
     pub contacts: u64,
@@ -288,9 +287,6 @@ pub struct StepTotals {
     /// Periodic cell only: the contacts' stress over the cell, `(1/A) sum sym(f_i ⊗ d_ij)`
     /// (xx, yy, xy), tension positive (SPEC §14). Zero in a box.
     pub cell_stress: [f64; 3],
-    /// Periodic cell only: the kinetic stress `-(1/A) sum m v ⊗ v` of the grains' velocities
-    /// relative to the affine field (xx, yy, xy), tension positive.
-    pub kinetic_stress: [f64; 3],
     /// Energy dissipated by Coulomb sliding over the step, grain–grain and grain–wall.
     pub friction_dissipation: f64,
     /// Contacts sliding at the Coulomb limit (grain–grain and grain–wall).
@@ -356,11 +352,30 @@ struct PairSums {
     failure: Option<Instability>,
 }
 
+/// The grains' kinetic figures after the last step (see [`World::kinetic`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct KineticTotals {
+    /// Kinetic energy of the grains, their deformation's included ([`Grain::kinetic_energy`]).
+    pub energy: f64,
+    /// Periodic cell only: the kinetic stress `-(1/A) sum m v ⊗ v` of the grains' velocities
+    /// relative to the affine field (xx, yy, xy), tension positive. Zero in a box.
+    pub stress: [f64; 3],
+}
+
+/// What the last step was, for the sums of [`World::kinetic`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LastStep {
+    /// None since the world was made (zero figures) or restored (the checkpoint's).
+    None(KineticTotals),
+    Plain,
+    /// A multi-rate cycle: its slow grains were summed after its first half, its fast grains
+    /// (`World::fast`) after its second.
+    Cycle,
+}
+
 /// What a grain pass returns besides the step's totals.
 #[derive(Debug, Default)]
 struct PassEnds {
-    /// `sum m v ⊗ v` (xx, yy, xy).
-    momentum_flux: [f64; 3],
     /// Grain–grain contact ends (each contact counted by both grains).
     contact_ends: u64,
     /// Grains a periodic cell wrapped back into it.
@@ -370,8 +385,6 @@ struct PassEnds {
 #[derive(Debug, Clone, Copy, Default)]
 struct ChunkSums {
     totals: StepTotals,
-    /// `sum m v ⊗ v` (xx, yy, xy).
-    momentum_flux: [f64; 3],
     contact_ends: u64,
     /// Grains a periodic cell wrapped back into it.
     wrapped: u64,
@@ -464,8 +477,10 @@ pub struct World {
     /// The substep of the coming multi-rate cycle, if the next step is one (see
     /// [`World::step`]); set with the adaptive time step.
     cycle_substep: Option<f64>,
-    /// Per-cycle scratch: whether each grain takes the two substeps of the cycle.
+    /// Per-cycle scratch: whether each grain takes the two substeps of the cycle (kept after
+    /// it for [`World::kinetic`]).
     fast: Vec<bool>,
+    last_step: LastStep,
 }
 
 /// The homogeneous deformation that maps the box with corners `from_lo`, `from_hi` (lower left,
@@ -535,6 +550,7 @@ impl World {
             affine_carry: false,
             cycle_substep: None,
             fast: Vec::new(),
+            last_step: LastStep::None(KineticTotals::default()),
         };
         world.count_levels();
         world
@@ -901,9 +917,7 @@ impl World {
         totals.contacts = ends.contact_ends / 2;
         match cell_motion {
             Some((motion, area_before)) => {
-                let area = motion.current.area();
                 totals.cell_stress = pair_sums.moment.map(|m| m / area_before);
-                totals.kinetic_stress = ends.momentum_flux.map(|m| -m / area);
                 self.follow_cell(&motion, ends.wrapped);
             }
             None => self.move_walls(dt, carried_box),
@@ -914,6 +928,7 @@ impl World {
             self.friction_work += totals.friction_dissipation;
         }
         self.totals = totals;
+        self.last_step = LastStep::Plain;
         self.phase_times.grains += grains_start.elapsed().as_secs_f64();
         Ok(())
     }
@@ -952,6 +967,7 @@ impl World {
         self.time += 2.0 * substep;
         self.step += 1;
         self.totals = totals;
+        self.last_step = LastStep::Cycle;
         Ok(())
     }
 
@@ -1136,14 +1152,10 @@ impl World {
             if let Some(f) = sums.failure {
                 return Err(f);
             }
-            for (sum, x) in ends.momentum_flux.iter_mut().zip(sums.momentum_flux) {
-                *sum += x;
-            }
             for w in 0..MAX_WALLS {
                 totals.wall_force[w] += sums.totals.wall_force[w];
             }
             totals.grain_area += sums.totals.grain_area;
-            totals.kinetic_energy += sums.totals.kinetic_energy;
             totals.elastic_energy += sums.totals.elastic_energy;
             totals.capped_contacts += sums.totals.capped_contacts;
             totals.friction_dissipation += sums.totals.friction_dissipation;
@@ -1178,6 +1190,75 @@ impl World {
             .zip(self.pair_contacts.iter().zip(&self.pair_state))
             .filter(|((_, active), _)| **active)
             .map(|((pair, _), (contact, state))| (*pair, contact, state))
+    }
+
+    /// The grains' kinetic energy and (in a periodic cell) kinetic stress after the last step.
+    ///
+    /// Only outputs read them, so the grain pass does not sum them every step (issue #16: they
+    /// were 55 of the 1,178 instructions a grain-step of a rigid step on LAMMPS's packing).
+    /// They are functions of the grains as the step left them, summed here in the grain pass's
+    /// order (in chunks of [`GRAIN_CHUNK`] grains, a multi-rate cycle's slow grains before its
+    /// fast ones): the bits the pass's sums had. Before any step, the figures the world was
+    /// made or restored with.
+    pub fn kinetic(&self) -> KineticTotals {
+        let cycle = match self.last_step {
+            LastStep::None(figures) => return figures,
+            LastStep::Plain => false,
+            LastStep::Cycle => true,
+        };
+        let density = self.params.material.density;
+        let scale = self.params.deformation_mass_scale;
+        // The sums of the pass's chunks, of the grains `counted` takes.
+        let chunk_sums = |counted: &(dyn Fn(usize) -> bool + Sync)| -> Vec<(f64, [f64; 3])> {
+            self.grains
+                .par_chunks(GRAIN_CHUNK)
+                .enumerate()
+                .map(|(chunk, grains)| {
+                    let mut energy = 0.0;
+                    let mut flux = [0.0; 3];
+                    for (k, grain) in grains.iter().enumerate() {
+                        if !counted(chunk * GRAIN_CHUNK + k) {
+                            continue;
+                        }
+                        let mass = grain.mass(density);
+                        energy += grain.kinetic_energy_of_mass(mass, scale);
+                        let share = symmetric_dyad(mass * grain.velocity, grain.velocity);
+                        for (sum, x) in flux.iter_mut().zip(share) {
+                            *sum += x;
+                        }
+                    }
+                    (energy, flux)
+                })
+                .collect()
+        };
+        let mut figures = KineticTotals::default();
+        let mut momentum_flux = [0.0; 3];
+        let mut add = |sums: Vec<(f64, [f64; 3])>| {
+            for (energy, flux) in sums {
+                figures.energy += energy;
+                for (sum, x) in momentum_flux.iter_mut().zip(flux) {
+                    *sum += x;
+                }
+            }
+        };
+        if cycle {
+            // A cycle runs in a box (its stress stays zero).
+            add(chunk_sums(&|g| !self.fast[g]));
+            add(chunk_sums(&|g| self.fast[g]));
+        } else {
+            add(chunk_sums(&|_| true));
+            if let Some(periodic) = &self.periodic {
+                let area = periodic.cell(&self.walls).area();
+                figures.stress = momentum_flux.map(|m| -m / area);
+            }
+        }
+        figures
+    }
+
+    /// Sets the figures [`kinetic`](Self::kinetic) gives until the next step: a checkpoint's,
+    /// for the world it restores.
+    pub fn restore_kinetic(&mut self, figures: KineticTotals) {
+        self.last_step = LastStep::None(figures);
     }
 
     /// Coordination numbers (z, z_nr, z_nr3) of the last step: `2C/N` over grain–grain

@@ -115,7 +115,7 @@ impl Measures {
             z,
             z_nr,
             z_nr3,
-            kinetic_energy: world.totals.kinetic_energy,
+            kinetic_energy: world.kinetic().energy,
             elastic_energy: world.totals.elastic_energy,
             inertial_number: state.inertial_number(strain_rate),
             strain_rate,

@@ -32,7 +32,7 @@ use crate::boundary::loading::LoadingProgram;
 use crate::boundary::periodic::PeriodicBoundary;
 use crate::boundary::walls::Wall;
 use crate::grain::{Grain, GrainLevel, ModelLevel};
-use crate::integration::{ContactHistory, MAX_WALLS, StepTotals};
+use crate::integration::{ContactHistory, KineticTotals, MAX_WALLS, StepTotals};
 use crate::scenario::{LoadedSample, Scenario};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -199,27 +199,33 @@ pub struct TotalsBits {
     pub cell_stresses: Option<[[Bits; 3]; 2]>,
 }
 
-impl From<&StepTotals> for TotalsBits {
-    fn from(t: &StepTotals) -> Self {
+impl TotalsBits {
+    /// The totals and the kinetic figures of the last step.
+    fn of(t: &StepTotals, kinetic: &KineticTotals) -> Self {
         TotalsBits {
             wall_force: t.wall_force.iter().map(|&f| f.into()).collect(),
             grain_area: t.grain_area.into(),
-            kinetic_energy: t.kinetic_energy.into(),
+            kinetic_energy: kinetic.energy.into(),
             elastic_energy: t.elastic_energy.into(),
             contacts: t.contacts,
             capped_contacts: t.capped_contacts,
             level_counts: t.level_counts,
-            cell_stresses: (t.cell_stress != [0.0; 3] || t.kinetic_stress != [0.0; 3]).then(|| {
+            cell_stresses: (t.cell_stress != [0.0; 3] || kinetic.stress != [0.0; 3]).then(|| {
                 [
                     t.cell_stress.map(Bits::from),
-                    t.kinetic_stress.map(Bits::from),
+                    kinetic.stress.map(Bits::from),
                 ]
             }),
         }
     }
-}
 
-impl TotalsBits {
+    fn to_kinetic(&self) -> KineticTotals {
+        KineticTotals {
+            energy: self.kinetic_energy.into(),
+            stress: self.cell_stresses.map_or([0.0; 3], |s| s[1].map(f64::from)),
+        }
+    }
+
     fn to_totals(&self) -> Option<StepTotals> {
         if self.wall_force.len() != MAX_WALLS {
             return None;
@@ -231,13 +237,11 @@ impl TotalsBits {
         Some(StepTotals {
             wall_force,
             grain_area: self.grain_area.into(),
-            kinetic_energy: self.kinetic_energy.into(),
             elastic_energy: self.elastic_energy.into(),
             contacts: self.contacts,
             capped_contacts: self.capped_contacts,
             level_counts: self.level_counts,
             cell_stress: self.cell_stresses.map_or([0.0; 3], |s| s[0].map(f64::from)),
-            kinetic_stress: self.cell_stresses.map_or([0.0; 3], |s| s[1].map(f64::from)),
             // Per-step figures of friction, recomputed by the next step.
             friction_dissipation: 0.0,
             sliding_contacts: 0,
@@ -476,6 +480,8 @@ pub struct Checkpoint {
     pub grains: Vec<Grain>,
     pub walls: Vec<Wall>,
     pub totals: StepTotals,
+    /// The grains' kinetic figures after the last step ([`crate::integration::World::kinetic`]).
+    pub kinetic: KineticTotals,
     pub program: LoadingProgram,
     pub runner: RunnerState,
     /// The periodic cell's state beyond its virtual walls (None in a box).
@@ -505,7 +511,7 @@ impl Checkpoint {
             time: self.time.into(),
             grains: grains_bits(&self.grains),
             walls: self.walls.iter().map(WallBits::from).collect(),
-            totals: (&self.totals).into(),
+            totals: TotalsBits::of(&self.totals, &self.kinetic),
             program: p.into(),
             confirmed_jamming: r.confirmed_jamming.as_ref().map(JammingBits::from),
             candidate: r.candidate.as_ref().map(JammingBits::from),
@@ -536,6 +542,7 @@ impl Checkpoint {
             .totals
             .to_totals()
             .ok_or_else(|| format!("expected {MAX_WALLS} wall forces"))?;
+        let kinetic = s.totals.to_kinetic();
         if s.walls.len() > MAX_WALLS {
             return Err(format!("{} walls (at most {MAX_WALLS})", s.walls.len()));
         }
@@ -631,6 +638,7 @@ impl Checkpoint {
             grains: grains_of(&s.grains),
             walls: s.walls.iter().map(Wall::from).collect(),
             totals,
+            kinetic,
             program,
             runner,
             periodic: s

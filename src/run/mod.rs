@@ -374,6 +374,7 @@ pub fn world_from_checkpoint(c: &Checkpoint) -> Result<World, String> {
         level_counts: world.totals.level_counts,
         ..c.totals
     };
+    world.restore_kinetic(c.kinetic);
     if scenario.model.adaptive().is_some() {
         world.set_levels(&c.runner.levels);
     }

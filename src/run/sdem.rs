@@ -154,6 +154,7 @@ impl Simulation for Sdem {
         use std::fmt::Write;
         if let Some(p) = &self.world.periodic {
             let t = &self.world.totals;
+            let kinetic_stress = self.world.kinetic().stress;
             let height = crate::boundary::walls::box_size(&self.world.walls).1;
             let _ = write!(
                 row,
@@ -161,8 +162,8 @@ impl Simulation for Sdem {
                 -t.cell_stress[2],
                 p.shear_strain,
                 p.tilt / height,
-                -0.5 * (t.kinetic_stress[0] + t.kinetic_stress[1]),
-                -t.kinetic_stress[2]
+                -0.5 * (kinetic_stress[0] + kinetic_stress[1]),
+                -kinetic_stress[2]
             );
         }
         if self.world.params.friction.is_some() {
@@ -230,6 +231,7 @@ impl Simulation for Sdem {
             grains: world.grains().to_vec(),
             walls: world.walls.clone(),
             totals: world.totals,
+            kinetic: world.kinetic(),
             program: run.program.clone(),
             runner: RunnerState::new(run.state, self.last_good.clone(), levels),
             periodic: world.periodic,
