@@ -27,8 +27,7 @@ pub(super) struct GrainPass<'a> {
     pub pair_contacts: &'a [PairContact],
     /// Whether pairs have friction (see [`PairContact::force_on_first_in`]).
     pub frictional_pairs: bool,
-    /// The periodic cell, if any: a pair's second grain is met at an image, and the pass sums
-    /// the momentum flux.
+    /// The periodic cell, if any: a pair's second grain is met at an image.
     pub cell: Option<PeriodicCell>,
     /// The walls grains meet (none in a periodic cell, whose virtual walls meet no grain).
     pub walls: &'a [Wall],

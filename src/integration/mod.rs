@@ -19,7 +19,8 @@
 //! Sums over grains (wall forces, areas, energies) are taken per fixed-size chunk and the chunk
 //! sums added in order; sums over contacts, per chunk of the pairs whose first grains form one
 //! such chunk, so that they depend neither on the thread count nor on when the neighbour list
-//! was built.
+//! was built. What only outputs read and the step's end state determines (the grains' kinetic
+//! energy and kinetic stress) is summed when asked ([`World::kinetic`]), in the same chunks.
 
 mod grain_pass;
 pub mod instability;
