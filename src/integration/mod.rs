@@ -1196,7 +1196,7 @@ impl World {
     /// The grains' kinetic energy and (in a periodic cell) kinetic stress after the last step.
     ///
     /// Only outputs read them, so the grain pass does not sum them every step (issue #16: they
-    /// were 55 of the 1,178 instructions a grain-step of a rigid step on LAMMPS's packing).
+    /// were 48 of the 1,178 instructions a grain-step of a rigid step on LAMMPS's packing).
     /// They are functions of the grains as the step left them, summed here in the grain pass's
     /// order (in chunks of [`GRAIN_CHUNK`] grains, a multi-rate cycle's slow grains before its
     /// fast ones): the bits the pass's sums had. Before any step, the figures the world was
