@@ -293,11 +293,13 @@ pub struct GrainShape {
     pub center: DVec2,
     /// `A R`: maps the unit reference circle onto the current contour (relative to the centre).
     pub map: DMat2,
-    /// `(A R)^-1`: current coordinates (relative to the centre) to reference coordinates.
-    pub inv_map: DMat2,
     /// Radius of a circle about the centre that contains the whole contour:
     /// `R max(1 + eps1, 1 + eps2)`.
     pub bounding_radius: f64,
+    /// The shape is the circle of radius `bounding_radius`, laid unrotated (`map` is that
+    /// radius times the identity): a frame's circle (see `Frame::circle`), whose inverse map is
+    /// `1 / radius` times the identity.
+    pub circle: bool,
 }
 
 /// The deformation gradient `A = Q(theta) U` of SPEC §2 (paper eq. 49–53).
@@ -355,8 +357,21 @@ impl GrainShape {
         Self {
             center,
             map,
-            inv_map: map.inverse(),
             bounding_radius: radius * (1.0 + eps1.max(eps2)),
+            circle: false,
+        }
+    }
+
+    /// `(A R)^-1`: current coordinates (relative to the centre) to reference coordinates.
+    /// Computed where it is needed rather than stored: a contact of two polygons needs one
+    /// grain's inverse on its common path, and the shapes are built for each pair from the
+    /// frames (issue #16).
+    #[inline]
+    pub fn inv_map(&self) -> DMat2 {
+        if self.circle {
+            DMat2::from_diagonal(DVec2::splat(1.0 / self.bounding_radius))
+        } else {
+            self.map.inverse()
         }
     }
 

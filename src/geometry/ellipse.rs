@@ -133,8 +133,9 @@ struct Quartic {
 impl Quartic {
     #[inline]
     fn new(i: &GrainShape, j: &GrainShape, e: DVec2) -> Self {
-        let m = j.inv_map * i.map;
-        let t = j.inv_map * (i.center - j.center);
+        let inv_map = j.inv_map();
+        let m = inv_map * i.map;
+        let t = inv_map * (i.center - j.center);
         let me = m * e;
         let (a, b, c) = (me + t, 2.0 * (m * e.perp()), t - me);
         Self {
@@ -298,7 +299,7 @@ pub fn ellipse_ellipse(i: &GrainShape, j: &GrainShape) -> Overlap {
         return Overlap::Separate;
     }
     // j's centre in i's reference frame: the direction the parametrisation is laid about.
-    let toward_j = i.inv_map * (j.center - i.center);
+    let toward_j = i.inv_map() * (j.center - i.center);
     let distance = toward_j.length();
     if distance == 0.0 {
         // Concentric: one contour holds the other (or they cross four times).
@@ -607,7 +608,7 @@ mod tests {
             DVec2::from_angle(1.1),
             0.2,
         );
-        let seed = i.inv_map * (j.center - i.center);
+        let seed = i.inv_map() * (j.center - i.center);
         let quartic = Quartic::new(&i, &j, seed / seed.length());
         for tau in [-3.0, -0.4, 0.0, 0.1, 2.5] {
             let f = quartic.image(quartic.direction(tau)).length_squared() - 1.0;

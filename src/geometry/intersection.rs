@@ -141,9 +141,10 @@ struct RelativeMap {
 impl RelativeMap {
     #[inline]
     fn new(a: &GrainShape, b: &GrainShape) -> Self {
+        let inv_map = b.inv_map();
         Self {
-            m: b.inv_map * a.map,
-            t: b.inv_map * (a.center - b.center),
+            m: inv_map * a.map,
+            t: inv_map * (a.center - b.center),
         }
     }
 
@@ -396,7 +397,7 @@ fn deepest_inside_node(
     inside: &impl NodeTest,
 ) -> Option<isize> {
     let RelativeMap { m, t } = *a_in_b;
-    let toward_b = a.inv_map * (b.center - a.center);
+    let toward_b = a.inv_map() * (b.center - a.center);
     let mut beta = angle::atan2(toward_b.y, toward_b.x);
     for _ in 0..2 {
         let (s, c) = angle::sin_cos(beta);
@@ -1026,7 +1027,7 @@ pub(super) mod tests {
     fn nodes_inside(table: &ContourTable, a: &GrainShape, b: &GrainShape) -> Vec<bool> {
         (0..table.nodes)
             .map(|k| {
-                let u = b.inv_map * (a.node(table, k) - b.center);
+                let u = b.inv_map() * (a.node(table, k) - b.center);
                 table.gauge(u, table.sector(u)) < 1.0
             })
             .collect()
@@ -1095,7 +1096,7 @@ pub(super) mod tests {
                 continue;
             }
             let (k_in, k_out) = if inside[k] { (k, next) } else { (next, k) };
-            let to_b = |x: DVec2| b.inv_map * (x - b.center);
+            let to_b = |x: DVec2| b.inv_map() * (x - b.center);
             let (p_in, p_out) = (to_b(a.node(table, k_in)), to_b(a.node(table, k_out)));
             let d = p_out - p_in;
             let t = (0..n)

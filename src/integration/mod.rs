@@ -134,15 +134,15 @@ impl Frame {
             GrainShape {
                 center: self.center,
                 map: DMat2::from_diagonal(DVec2::splat(radius)),
-                inv_map: DMat2::from_diagonal(DVec2::splat(1.0 / radius)),
                 bounding_radius: radius,
+                circle: true,
             }
         } else {
             GrainShape {
                 center: self.center,
                 map: self.map,
-                inv_map: self.map.inverse(),
                 bounding_radius: self.bounding_radius,
+                circle: false,
             }
         }
     }
@@ -1596,7 +1596,7 @@ mod tests {
     fn shape_bits(s: &GrainShape) -> Vec<u64> {
         let mut v = vec![s.center.x.to_bits(), s.center.y.to_bits()];
         v.extend(bits(s.map));
-        v.extend(bits(s.inv_map));
+        v.extend(bits(s.inv_map()));
         v.push(s.bounding_radius.to_bits());
         v
     }
@@ -1659,8 +1659,8 @@ mod tests {
         let expected = GrainShape {
             center: disc.center,
             map: DMat2::from_diagonal(DVec2::splat(radius)),
-            inv_map: DMat2::from_diagonal(DVec2::splat(1.0 / radius)),
             bounding_radius: radius,
+            circle: true,
         };
         assert!(frame.circle);
         assert_eq!(shape_bits(&frame.shape()), shape_bits(&expected));

@@ -343,7 +343,7 @@ pub fn check_packing(
         // reaching past the centre), and two copies of one grain, whose contours lie on each
         // other and cross nowhere, are caught here too.
         let inside =
-            |a: &GrainShape, b: &GrainShape| contours.contains(b.inv_map * (a.center - b.center));
+            |a: &GrainShape, b: &GrainShape| contours.contains(b.inv_map() * (a.center - b.center));
         if inside(&shapes[i], &shapes[j]) || inside(&shapes[j], &shapes[i]) {
             return Err(pair(format!(
                 "the grains (radii {} and {}, centres {} apart) overlap so much that a centre \
