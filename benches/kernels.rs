@@ -381,3 +381,77 @@ mod disc_pairs {
             });
     }
 }
+
+/// Angles of grains that have turned for a while (tens of radians, as in a run's jammed state),
+/// in random order: what the frames' sines and cosines see.
+fn turned_angles(count: usize) -> Vec<f64> {
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    (0..count)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            60.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 30.0
+        })
+        .collect()
+}
+
+/// `libm`'s sincos one angle at a time, against [`sdem::geometry::angle::sin_cos_lanes`] four
+/// at a time (the grain pass's way), on 4,096 angles.
+#[divan::bench(args = [false, true])]
+fn sin_cos_of_turned_grains(bencher: divan::Bencher, lanes: bool) {
+    use sdem::geometry::angle::{sin_cos, sin_cos_lanes};
+    use sdem::lanes::Lanes;
+    let angles = turned_angles(4096);
+    bencher.bench(|| {
+        let mut total = 0.0;
+        if lanes {
+            for four in angles.chunks_exact(4) {
+                let (s, c) = sin_cos_lanes(&Lanes([four[0], four[1], four[2], four[3]]));
+                total += s.0[0] + c.0[3];
+            }
+        } else {
+            for &x in &angles {
+                let (s, c) = sin_cos(black_box(x));
+                total += s + c;
+            }
+        }
+        black_box(total)
+    });
+}
+
+/// The frames of 4,096 deforming grains: one at a time (`Frame::of_grain`) against blocks of
+/// four (`Frame::write_full_block`, the grain pass's way).
+#[divan::bench(args = [false, true])]
+fn frames_of_deforming_grains(bencher: divan::Bencher, blocks: bool) {
+    use sdem::grain::Grain;
+    use sdem::integration::{FRAME_LANES, Frame};
+    let angles = turned_angles(2 * 4096);
+    let grains: Vec<Grain> = (0..4096)
+        .map(|k| Grain {
+            theta: angles[2 * k],
+            alpha: angles[2 * k + 1],
+            eps1: 0.02,
+            eps2: -0.015,
+            eps1_rate: 1e-3,
+            eps2_rate: -2e-3,
+            alpha_rate: 0.1,
+            omega: 0.3,
+            ..Grain::at_rest(DVec2::new(k as f64, 0.0), 0.012)
+        })
+        .collect();
+    let mut frames = vec![Frame::default(); grains.len()];
+    bencher.bench_local(|| {
+        if blocks {
+            for first in (0..grains.len()).step_by(FRAME_LANES) {
+                let block = std::array::from_fn(|l| first + l);
+                Frame::write_full_block(&mut frames, &grains, block, 1.0);
+            }
+        } else {
+            for (frame, grain) in frames.iter_mut().zip(&grains) {
+                *frame = Frame::of_grain(grain, 1.0);
+            }
+        }
+        black_box(&frames);
+    });
+}

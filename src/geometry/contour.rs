@@ -10,7 +10,7 @@
 //! preserve incidence, convexity and the order of the nodes, so "inside the polygon" and "where
 //! does a segment leave the polygon" are answered exactly there, with a table of the N-gon.
 
-use super::angle;
+use super::{affine, angle};
 use glam::{DMat2, DVec2};
 
 /// The unit regular polygon shared by every grain of a run: node directions and edge normals.
@@ -312,7 +312,7 @@ pub fn deformation_gradient(theta: f64, eps1: f64, eps2: f64, alpha: f64) -> DMa
 /// builds, for callers that already hold the sine and cosine).
 #[inline]
 pub fn rotation(sin: f64, cos: f64) -> DMat2 {
-    DMat2::from_cols(DVec2::new(cos, sin), DVec2::new(-sin, cos))
+    affine::rotation(sin, cos).to_glam()
 }
 
 /// `J`, the rotation by 90 degrees: a rigid spin omega has the velocity gradient `omega J`.
@@ -327,10 +327,7 @@ pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
 /// [`principal_stretch`] from the sine and cosine of alpha.
 #[inline]
 pub fn stretch_from(eps1: f64, eps2: f64, s: f64, c: f64) -> DMat2 {
-    let u11 = 1.0 + eps1 * c * c + eps2 * s * s;
-    let u22 = 1.0 + eps1 * s * s + eps2 * c * c;
-    let u12 = (eps1 - eps2) * c * s;
-    DMat2::from_cols(DVec2::new(u11, u12), DVec2::new(u12, u22))
+    affine::stretch(eps1, eps2, s, c).to_glam()
 }
 
 impl GrainShape {
@@ -353,13 +350,25 @@ impl GrainShape {
         eps1: f64,
         eps2: f64,
     ) -> Self {
-        let map = deformation * radius;
+        Self::from_map(center, deformation * radius, radius, eps1, eps2)
+    }
+
+    /// The shape whose map `A R` is already built, of a grain of reference radius `radius`.
+    #[inline]
+    pub fn from_map(center: DVec2, map: DMat2, radius: f64, eps1: f64, eps2: f64) -> Self {
         Self {
             center,
             map,
-            bounding_radius: radius * (1.0 + eps1.max(eps2)),
+            bounding_radius: Self::bounding_radius_of(radius, eps1, eps2),
             circle: false,
         }
+    }
+
+    /// [`GrainShape::bounding_radius`] of a grain of reference radius `radius` and strains
+    /// `eps1`, `eps2`.
+    #[inline(always)]
+    pub fn bounding_radius_of(radius: f64, eps1: f64, eps2: f64) -> f64 {
+        radius * (1.0 + eps1.max(eps2))
     }
 
     /// `(A R)^-1`: current coordinates (relative to the centre) to reference coordinates.

@@ -4,10 +4,9 @@
 //! field of a grain together; the contact kernels read a separate compact array of
 //! [`GrainShape`](crate::geometry::GrainShape)s built once per step.
 
+use crate::geometry::affine::{AffineState, map_and_velocity_gradient};
 use crate::geometry::angle;
-use crate::geometry::contour::{
-    GrainShape, QUARTER_TURN, principal_stretch, rotation, stretch_from,
-};
+use crate::geometry::contour::GrainShape;
 use glam::{DMat2, DVec2};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -141,41 +140,52 @@ impl Grain {
     /// point at x moves at `velocity + L (x - center)`. With `A = Q(theta) U`,
     /// `L = omega J + Q(theta) (dU/dt) U^-1 Q(theta)^T`, J the rotation by 90 degrees.
     pub fn velocity_gradient(&self) -> DMat2 {
-        let (sin_alpha, cos_alpha) = angle::sin_cos(self.alpha);
-        let stretch = principal_stretch(self.eps1, self.eps2, self.alpha);
-        self.velocity_gradient_from(
-            rotation(sin_alpha, cos_alpha),
-            angle::rotation_by(self.theta),
-            stretch,
-        )
+        self.shape_and_velocity_gradient().1
     }
 
     /// [`Grain::shape`] and [`Grain::velocity_gradient`] together: the sines and cosines of
     /// theta and alpha are computed once (they were a tenth of the cost of a dense step).
     pub fn shape_and_velocity_gradient(&self) -> (GrainShape, DMat2) {
-        let (sin_theta, cos_theta) = angle::sin_cos(self.theta);
-        let (sin_alpha, cos_alpha) = angle::sin_cos(self.alpha);
-        let rot = rotation(sin_theta, cos_theta);
-        let stretch = stretch_from(self.eps1, self.eps2, sin_alpha, cos_alpha);
-        let shape = GrainShape::from_deformation(
+        let (map, gradient) = map_and_velocity_gradient(&self.affine_state());
+        let shape = GrainShape::from_map(
             self.center,
+            map.to_glam(),
             self.radius,
-            rot * stretch,
             self.eps1,
             self.eps2,
         );
-        let gradient = self.velocity_gradient_from(rotation(sin_alpha, cos_alpha), rot, stretch);
-        (shape, gradient)
+        (shape, gradient.to_glam())
     }
 
-    /// The velocity gradient from `Q(alpha)`, `Q(theta)` and `U`.
-    fn velocity_gradient_from(&self, q: DMat2, rot: DMat2, u: DMat2) -> DMat2 {
-        let j = QUARTER_TURN;
-        let d = DMat2::from_diagonal(DVec2::new(self.eps1, self.eps2));
-        let d_rate = DMat2::from_diagonal(DVec2::new(self.eps1_rate, self.eps2_rate));
-        // dU/dt = Q (alpha_rate (J D - D J) + dD/dt) Q^T
-        let du = q * ((j * d - d * j) * self.alpha_rate + d_rate) * q.transpose();
-        j * self.omega + rot * du * u.inverse() * rot.transpose()
+    /// What [`map_and_velocity_gradient`] needs of this grain: the sines and cosines of theta
+    /// and alpha, its strains, rates and radius.
+    #[inline]
+    pub fn affine_state(&self) -> AffineState<f64> {
+        let (sin_theta, cos_theta) = angle::sin_cos(self.theta);
+        let (sin_alpha, cos_alpha) = angle::sin_cos(self.alpha);
+        AffineState {
+            sin_theta,
+            cos_theta,
+            sin_alpha,
+            cos_alpha,
+            ..self.affine_state_without_angles()
+        }
+    }
+
+    /// [`Grain::affine_state`] with zeros for the sines and cosines, for who computes them
+    /// elsewhere.
+    #[inline(always)]
+    pub fn affine_state_without_angles(&self) -> AffineState<f64> {
+        AffineState {
+            eps1: self.eps1,
+            eps2: self.eps2,
+            eps1_rate: self.eps1_rate,
+            eps2_rate: self.eps2_rate,
+            alpha_rate: self.alpha_rate,
+            omega: self.omega,
+            radius: self.radius,
+            ..Default::default()
+        }
     }
 
     /// Kinetic energy of all six degrees of freedom, with the deformation DoF's masses scaled by

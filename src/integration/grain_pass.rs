@@ -4,7 +4,8 @@
 //! while its state is still in cache (see [`World::frames_current`](super::World)).
 
 use super::{
-    BoxCarry, ChunkSums, Frame, GrainStress, Instability, MAX_WALLS, PairContact, Parameters,
+    BoxCarry, ChunkSums, FRAME_LANES, Frame, GrainStress, Instability, MAX_WALLS, PairContact,
+    Parameters,
 };
 use crate::boundary::periodic::{CellMotion, PeriodicCell};
 use crate::boundary::walls::Wall;
@@ -112,7 +113,7 @@ impl GrainPass<'_> {
     /// The grains of one chunk, from grain `first` on. `chunk.frames` holds their frames at
     /// the start of the step; each is replaced by the frame of its updated grain, and its
     /// centre and reach (the broad phase's) with it. Returns the chunk's sums, in grain order.
-    pub fn chunk(&self, first: usize, chunk: GrainChunk<'_>) -> ChunkSums {
+    pub fn chunk(&self, first: usize, mut chunk: GrainChunk<'_>) -> ChunkSums {
         let (params, walls, step) = (self.params, self.walls, self.step);
         let density = params.material.density;
         let mut sums = ChunkSums::default();
@@ -145,10 +146,6 @@ impl GrainPass<'_> {
             };
             if turn == Turn::SlowSecond {
                 self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
-                frame.write(grain, level.level, density);
-                sums.circle_frames += frame.circle as usize;
-                chunk.centers[k] = frame.center;
-                chunk.reach[k] = frame.bounding_radius;
                 continue;
             }
             let dt = turn.dt(self.dt);
@@ -250,11 +247,8 @@ impl GrainPass<'_> {
                 sums.contact_ends += load.contacts as u64;
             }
             self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
-            frame.write(grain, level.level, density);
-            sums.circle_frames += frame.circle as usize;
-            chunk.centers[k] = frame.center;
-            chunk.reach[k] = frame.bounding_radius;
         }
+        write_frames(&mut chunk, density, &mut sums);
         sums
     }
 
@@ -316,6 +310,41 @@ impl GrainPass<'_> {
             load.contacts += 1;
         }
         load
+    }
+}
+
+/// Writes the next step's frames of a chunk's updated grains, and the broad phase's copies of
+/// their centres and reaches: circles one at a time, the other grains in blocks of
+/// [`FRAME_LANES`] ([`Frame::write_full_block`]). After all of the chunk's updates, which read each
+/// grain's frame of the step's start.
+fn write_frames(chunk: &mut GrainChunk<'_>, density: f64, sums: &mut ChunkSums) {
+    let mut block = [0; FRAME_LANES];
+    let mut filled = 0;
+    for k in 0..chunk.grains.len() {
+        let grain = &chunk.grains[k];
+        if Frame::is_circle(grain, chunk.levels[k].level) {
+            chunk.frames[k].write_circle(grain, density);
+            sums.circle_frames += 1;
+            continue;
+        }
+        block[filled] = k;
+        filled += 1;
+        if filled == FRAME_LANES {
+            Frame::write_full_block(chunk.frames, chunk.grains, block, density);
+            filled = 0;
+        }
+    }
+    for &k in &block[..filled] {
+        chunk.frames[k] = Frame::of_grain(&chunk.grains[k], density);
+    }
+    for ((frame, center), reach) in chunk
+        .frames
+        .iter()
+        .zip(chunk.centers.iter_mut())
+        .zip(chunk.reach.iter_mut())
+    {
+        *center = frame.center;
+        *reach = frame.bounding_radius;
     }
 }
 
