@@ -237,13 +237,7 @@ mod tests {
     }
 
     fn random_states(count: usize) -> Vec<AffineState<f64>> {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut unit = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut unit = super::super::intersection::tests::unit_randoms(23);
         (0..count)
             .map(|k| {
                 let (theta, alpha) = (40.0 * unit() - 20.0, 6.0 * unit() - 3.0);

@@ -193,13 +193,7 @@ mod tests {
             1e300,
             -4e6,
         ];
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut unit = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut unit = super::super::intersection::tests::unit_randoms(17);
         for scale in [1.0, 8.0, 30.0, 1e3, 1e6, 2e6] {
             for _ in 0..20_000 {
                 values.push(scale * (2.0 * unit() - 1.0));

@@ -1017,7 +1017,7 @@ pub(super) mod tests {
     }
 
     /// Uniform numbers in [0, 1) from a seeded stream (the random cases of these tests).
-    fn unit_randoms(seed: u64) -> impl FnMut() -> f64 {
+    pub(in crate::geometry) fn unit_randoms(seed: u64) -> impl FnMut() -> f64 {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
         move || crate::sample::unit_random(&mut rng)
     }
