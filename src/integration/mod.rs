@@ -108,11 +108,11 @@ impl Frame {
         }
     }
 
-    /// Writes [`Frame::of_grain`] of the grains `block` into `frames` (the same indices), their
-    /// maps and velocity gradients computed side by side in lanes (with AVX where the
-    /// processor has it, chosen at run time): the same bits, grain by grain. The matrices were
-    /// three fifths of the frame's cost at the full level (issue #16); the sines and cosines
-    /// stay one grain at a time.
+    /// Writes [`Frame::of_grain`] of the grains `block` into `frames` (the same indices), the
+    /// sines and cosines of their angles, their maps and velocity gradients computed side by
+    /// side in lanes (with AVX where the processor has it, chosen at run time): the same bits,
+    /// grain by grain. These were some 400 instructions a grain-step at the full level, and
+    /// `libm`'s branches on the angles of grains that have turned (issue #16).
     #[inline]
     pub fn write_full_block(
         frames: &mut [Frame],
@@ -162,10 +162,10 @@ fn affine_lanes(angles: &BlockAngles, states: &AffineState<FrameLanes>) -> Affin
     })
 }
 
-/// [`map_and_velocity_gradient`] of a block's lanes, with AVX where the processor has it. Out
-/// of line, so that the lanes are loaded from memory as vectors (inlined into the gather, the
-/// compiler vectorized the block along the matrices instead: 190 instructions a grain where
-/// this takes 36).
+/// [`affine_lanes`], with AVX where the processor has it. Out of line, so that the lanes are
+/// loaded from memory as vectors: inlined into the gather, the compiler vectorised the
+/// matrices along their own entries instead of across the grains (190 instructions a grain
+/// for the matrices, against 37 out of line).
 #[inline(never)]
 fn affine_lanes_dispatch(angles: &BlockAngles, states: &AffineState<FrameLanes>) -> AffineLanes {
     #[cfg(target_arch = "x86_64")]
