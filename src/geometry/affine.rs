@@ -188,25 +188,6 @@ impl<const N: usize> AffineState<Lanes<N>> {
         self.omega.0[l] = state.omega;
         self.radius.0[l] = state.radius;
     }
-
-    /// Lane `l` holds `states[l]`.
-    #[inline(always)]
-    pub fn lanes_of(states: &[AffineState<f64>; N]) -> Self {
-        let lane = |f: fn(&AffineState<f64>) -> f64| Lanes::from_fn(|l| f(&states[l]));
-        Self {
-            sin_theta: lane(|s| s.sin_theta),
-            cos_theta: lane(|s| s.cos_theta),
-            sin_alpha: lane(|s| s.sin_alpha),
-            cos_alpha: lane(|s| s.cos_alpha),
-            eps1: lane(|s| s.eps1),
-            eps2: lane(|s| s.eps2),
-            eps1_rate: lane(|s| s.eps1_rate),
-            eps2_rate: lane(|s| s.eps2_rate),
-            alpha_rate: lane(|s| s.alpha_rate),
-            omega: lane(|s| s.omega),
-            radius: lane(|s| s.radius),
-        }
-    }
 }
 
 /// The grain's map `A R = Q(theta) U R` and the velocity gradient of its affine motion,
@@ -294,8 +275,11 @@ mod tests {
         // Expectation: four grains side by side are four one-grain computations, every bit.
         let states = random_states(400);
         for block in states.chunks_exact(4) {
-            let block: &[AffineState<f64>; 4] = block.try_into().unwrap();
-            let (maps, gradients) = map_and_velocity_gradient(&AffineState::lanes_of(block));
+            let mut lanes = AffineState::<Lanes<4>>::default();
+            for (l, s) in block.iter().enumerate() {
+                lanes.set_lane(l, s);
+            }
+            let (maps, gradients) = map_and_velocity_gradient(&lanes);
             for (l, s) in block.iter().enumerate() {
                 let (map, gradient) = map_and_velocity_gradient(s);
                 let glam_bits = |m: DMat2| m.to_cols_array().map(f64::to_bits);

@@ -321,12 +321,6 @@ pub const QUARTER_TURN: DMat2 = DMat2::from_cols(DVec2::new(0.0, 1.0), DVec2::ne
 /// The symmetric stretch `U = I + Q(alpha) diag(eps1, eps2) Q(alpha)^T`.
 pub fn principal_stretch(eps1: f64, eps2: f64, alpha: f64) -> DMat2 {
     let (s, c) = angle::sin_cos(alpha);
-    stretch_from(eps1, eps2, s, c)
-}
-
-/// [`principal_stretch`] from the sine and cosine of alpha.
-#[inline]
-pub fn stretch_from(eps1: f64, eps2: f64, s: f64, c: f64) -> DMat2 {
     affine::stretch(eps1, eps2, s, c).to_glam()
 }
 

@@ -1,7 +1,7 @@
 //! Geometry: the affine map of a deformed grain and its velocity gradient, contour polygons of
-//! deformed grains, their intersections with each other and with walls, the closed forms of the same contacts for exact circles (rigid discs), and the broad
-//! phase that finds the candidate pairs; with exact contours, the same contacts of the grains'
-//! ellipses.
+//! deformed grains, their intersections with each other and with walls, the closed forms of
+//! the same contacts for exact circles (rigid discs), and the broad phase that finds the
+//! candidate pairs; with exact contours, the same contacts of the grains' ellipses.
 
 pub mod affine;
 pub mod angle;

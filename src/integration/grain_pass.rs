@@ -1,7 +1,8 @@
 //! The grain pass of the step: each grain's pair contacts gathered in pair order, its wall
 //! contacts, stresses and update (SPEC §3–§6, §9), and the sums over a chunk of grains in grain
-//! order. Each grain's frame for the next step is written as soon as the grain is updated,
-//! while its state is still in cache (see [`World::frames_current`](super::World)).
+//! order. A chunk's frames for the next step are written right after its grains' updates,
+//! while they are still in cache, deforming grains four at a time (see
+//! [`World::frames_current`](super::World)).
 
 use super::{
     BoxCarry, ChunkSums, FRAME_LANES, Frame, GrainStress, Instability, MAX_WALLS, PairContact,
