@@ -38,8 +38,9 @@ pub fn cos(x: f64) -> f64 {
 /// the high word of `|x|`: no reduction below pi/4, `k` = 1 to 4 up to 9 pi/4 (each range with
 /// its own constants, equal to `k PIO2_1` and `k PIO2_1T`), `rint(x 2/pi)` beyond. Here the
 /// ranges are comparisons of `|x|` with the same bounds, and a lane that `libm` may send down
-/// another path (a second round of reduction, `|x|` under 2^-27 or from 2^20 pi/2, infinities
-/// and NaN) is computed by `libm`'s `sincos` itself. (Near pi/2, pi, 3 pi/2 and 2 pi libm's
+/// another path (a second round of reduction, `|x|` from 2^20 pi/2, infinities and NaN) is
+/// computed by `libm`'s `sincos` itself; under 2^-27 `libm` returns `(x, 1)`, and so do the
+/// lanes. (Near pi/2, pi, 3 pi/2 and 2 pi libm's
 /// ranges take its general reduction, whose `k` there is the range's and whose first round is
 /// the same arithmetic: only its second round differs, and such lanes go to libm.)
 #[inline(always)]
@@ -105,9 +106,10 @@ pub fn sin_cos_lanes<const N: usize>(x: &Lanes<N>) -> (Lanes<N>, Lanes<N>) {
         // libm's second round of reduction, where y0's exponent is more than 16 under x's.
         let power_of_x = f64::from_bits(x.to_bits() & EXPONENT);
         let second_round = y0.abs() < power_of_x * TWO_TO_MINUS_16;
-        // (A NaN is in no range.)
-        let in_range = (TINY..MEDIUM_END).contains(&magnitude);
-        let off_path = !in_range | second_round;
+        // (A NaN is in no range.) Under 2^-27 libm returns (x, 1): a select below, not a
+        // call, for a grain's alpha is exactly 0 until its strains part.
+        let tiny = magnitude < TINY;
+        let off_path = !(magnitude < MEDIUM_END) | second_round;
         elsewhere.0[lane] = if off_path { 1.0 } else { 0.0 };
 
         let z = y0 * y0;
@@ -131,6 +133,7 @@ pub fn sin_cos_lanes<const N: usize>(x: &Lanes<N>) -> (Lanes<N>, Lanes<N>) {
         let odd = quadrant - 2.0 * half == 1.0;
         let (s, c) = if odd { (c, -s) } else { (s, c) };
         let (s, c) = if half == 1.0 { (-s, -c) } else { (s, c) };
+        let (s, c) = if tiny { (x, 1.0) } else { (s, c) };
         sin.0[lane] = s;
         cos.0[lane] = c;
     }
