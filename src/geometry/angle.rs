@@ -109,7 +109,8 @@ pub fn sin_cos_lanes<const N: usize>(x: &Lanes<N>) -> (Lanes<N>, Lanes<N>) {
         // (A NaN is in no range.) Under 2^-27 libm returns (x, 1): a select below, not a
         // call, for a grain's alpha is exactly 0 until its strains part.
         let tiny = magnitude < TINY;
-        let off_path = !(magnitude < MEDIUM_END) | second_round;
+        let in_range = magnitude < MEDIUM_END;
+        let off_path = !in_range | second_round;
         elsewhere.0[lane] = if off_path { 1.0 } else { 0.0 };
 
         let z = y0 * y0;
