@@ -118,6 +118,13 @@ impl ContourTable {
         self.vertex_ring[(k + self.nodes as isize) as usize]
     }
 
+    /// The vertices three times over: node k (k in [-N, 2N)) at index k + N, so that a
+    /// kernel loads consecutive nodes as one block of memory.
+    #[inline(always)]
+    pub fn vertex_ring(&self) -> &[DVec2] {
+        &self.vertex_ring
+    }
+
     /// Node index nearest to the reference angle `beta` (radians, any range).
     #[inline]
     pub fn nearest_node(&self, beta: f64) -> isize {
@@ -253,8 +260,10 @@ impl ContourTable {
     }
 }
 
-/// One edge of the unit polygon: from node k to node k+1, with its outward normal.
+/// One edge of the unit polygon: from node k to node k+1, with its outward normal (in this
+/// order in memory, where a kernel loads them together).
 #[derive(Debug, Clone, Copy)]
+#[repr(C)]
 pub struct Edge {
     pub start: DVec2,
     pub end: DVec2,

@@ -10,6 +10,7 @@ pub mod circle;
 pub mod contour;
 pub mod ellipse;
 pub mod intersection;
+pub mod intersection_lanes;
 
 pub use contour::{ContourTable, GrainShape};
 pub use ellipse::{Contours, ellipse_ellipse, ellipse_wall};

@@ -9,6 +9,13 @@
 //! path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
 //! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
 //! computed again by the one-pair path, which handles those cases.
+//!
+//! Pairs of contour polygons that were in contact last step go four at a time through the
+//! common path of their contact in AVX lanes ([`grain_grain_block`]): the pass fills a block
+//! with the next such pairs within `POLYGON_WINDOW` and takes their results in pair order
+//! (`PolygonsAhead`). A lane gives the one-pair path's bits or leaves the pair to it, so the
+//! blocks' make-up (which changes with the chunks, and so with the thread count) changes
+//! nothing.
 
 use super::{
     Frame, Instability, PairContact, PairState, PairSums, Parameters, circle_velocity_at, prefetch,
@@ -21,7 +28,10 @@ use crate::geometry::circle::{
     shallow_segment_area,
 };
 use crate::geometry::intersection::ContactGeometry;
-use crate::geometry::{Contours, GrainShape, Overlap, PairHint};
+use crate::geometry::intersection_lanes::{
+    BLOCK, LaneContact, LanePair, block_available, grain_grain_block,
+};
+use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
 use glam::{DMat2, DVec2};
 
@@ -107,6 +117,7 @@ impl PairPass<'_> {
                 if fast[i as usize] && fast[j as usize] {
                     self.one_pair::<FRICTIONAL>(
                         first_pair + k,
+                        None,
                         &mut states[k],
                         &mut actives[k],
                         &mut records[k],
@@ -117,6 +128,7 @@ impl PairPass<'_> {
             return sums;
         }
         let mut lanes = None;
+        let mut polygons = PolygonsAhead::new(self.contours, self.every_frame_a_circle);
         let mut k = 0;
         while k < count {
             let p = first_pair + k;
@@ -138,8 +150,10 @@ impl PairPass<'_> {
                 k += LANES;
             } else {
                 self.prefetch_ahead(p);
+                let computed = polygons.take(self, k, first_pair, states);
                 self.one_pair::<FRICTIONAL>(
                     p,
+                    computed,
                     &mut states[k],
                     &mut actives[k],
                     &mut records[k],
@@ -149,6 +163,30 @@ impl PairPass<'_> {
             }
         }
         sums
+    }
+
+    /// Whether pair `p` (hint `hint`) may take the polygons' common path: two grains that are
+    /// not circles, whose contours crossed last step.
+    #[inline(always)]
+    fn on_polygon_path(&self, p: usize, hint: &PairHint) -> bool {
+        let [i, j] = self.pairs[p];
+        hint.first.lo >= 0
+            && hint.second.lo >= 0
+            && !self.frames[i as usize].circle
+            && !self.frames[j as usize].circle
+    }
+
+    /// Pair `p`'s two shapes as its contact sees them (the second at the image that meets the
+    /// first) and its hint.
+    #[inline(always)]
+    fn lane_pair(&self, p: usize, hint: PairHint) -> LanePair {
+        let [i, j] = self.pairs[p];
+        let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
+        let shape_j = GrainShape {
+            center: self.second_end(p, fi, fj).center,
+            ..fj.shape()
+        };
+        LanePair::new(&fi.shape(), &shape_j, hint)
     }
 
     #[inline(always)]
@@ -182,11 +220,13 @@ impl PairPass<'_> {
         end
     }
 
-    /// Pair `p` on its own: any pair of grains, any case.
+    /// Pair `p` on its own: any pair of grains, any case. `computed`: the pair's contact and
+    /// next hint where a block of polygon lanes found them (see [`PolygonsAhead`]).
     #[inline(always)]
     fn one_pair<const FRICTIONAL: bool>(
         &self,
         p: usize,
+        computed: LaneContact,
         state: &mut PairState,
         active: &mut bool,
         record: &mut PairContact,
@@ -196,7 +236,10 @@ impl PairPass<'_> {
         let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
         let end = self.second_end(p, fi, fj);
         let mut hint = state.hint;
-        let overlap = if fi.circle && fj.circle {
+        let overlap = if let Some((contact, next_hint)) = computed {
+            hint = next_hint;
+            Overlap::Contact(contact)
+        } else if fi.circle && fj.circle {
             disc_disc(
                 fi.center,
                 fi.bounding_radius,
@@ -366,7 +409,7 @@ impl PairPass<'_> {
             let radius = [input.first.radius.0[lane], input.second.radius.0[lane]];
             let touch = match out.lane(lane, &radius) {
                 LaneCase::Irregular => {
-                    self.one_pair::<FRICTIONAL>(p, state, active, record, sums);
+                    self.one_pair::<FRICTIONAL>(p, None, state, active, record, sums);
                     continue;
                 }
                 LaneCase::Separate => None,
@@ -428,6 +471,87 @@ impl PairPass<'_> {
                 }
             }
         }
+    }
+}
+
+/// How far ahead of the pair in hand the pair pass looks for pairs to fill a block of polygon
+/// lanes.
+const POLYGON_WINDOW: usize = 16;
+
+/// Contacts of polygon pairs computed ahead, a block of [`BLOCK`] at a time, for the pair pass
+/// to take in pair order: the first pair on the polygons' common path fills a block with the
+/// next such pairs within [`POLYGON_WINDOW`] (each computed exactly as on its own, so the
+/// blocks' make-up changes no bit).
+struct PolygonsAhead<'a> {
+    table: Option<&'a ContourTable>,
+    /// The block's pairs (chunk indices, increasing) and their results; `taken` of them used.
+    pairs: [usize; BLOCK],
+    /// The block's shapes and hints, kept from block to block (only their filling changes).
+    block: [LanePair; BLOCK],
+    results: [LaneContact; BLOCK],
+    filled: usize,
+    taken: usize,
+}
+
+impl<'a> PolygonsAhead<'a> {
+    /// Blocks of `contours`' polygons, where the processor runs them and some frame is not a
+    /// circle.
+    fn new(contours: &'a Contours, every_frame_a_circle: bool) -> Self {
+        Self {
+            table: match contours {
+                Contours::Polygon(table) if !every_frame_a_circle && block_available() => {
+                    Some(table)
+                }
+                _ => None,
+            },
+            pairs: [0; BLOCK],
+            block: [LanePair::default(); BLOCK],
+            results: [None; BLOCK],
+            filled: 0,
+            taken: 0,
+        }
+    }
+
+    /// The contact of the chunk's pair `k` if a block computed it, computing a block from `k`
+    /// on first where `k` is on the common path; `None` leaves the pair to the one-pair path.
+    #[inline(always)]
+    fn take(
+        &mut self,
+        pass: &PairPass<'_>,
+        k: usize,
+        first_pair: usize,
+        states: &[PairState],
+    ) -> LaneContact {
+        let table = self.table?;
+        if self.taken < self.filled && self.pairs[self.taken] == k {
+            self.taken += 1;
+            return self.results[self.taken - 1];
+        }
+        if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
+            return None;
+        }
+        let block = &mut self.block;
+        let mut filled = 0;
+        let window = &states[k..(k + POLYGON_WINDOW).min(states.len())];
+        for (ahead, state) in (k..).zip(window) {
+            let hint = state.hint;
+            if pass.on_polygon_path(first_pair + ahead, &hint) {
+                block[filled] = pass.lane_pair(first_pair + ahead, hint);
+                self.pairs[filled] = ahead;
+                filled += 1;
+                if filled == BLOCK {
+                    break;
+                }
+            }
+        }
+        // Spare lanes repeat the first pair; their results are not used.
+        for lane in filled..BLOCK {
+            block[lane] = block[0];
+        }
+        grain_grain_block(table, block, &mut self.results);
+        self.filled = filled;
+        self.taken = 1;
+        self.results[0]
     }
 }
 
@@ -1001,6 +1125,7 @@ mod tests {
             for p in 0..count {
                 pass.one_pair::<true>(
                     p,
+                    None,
                     &mut one.0[p],
                     &mut one.1[p],
                     &mut one.2[p],

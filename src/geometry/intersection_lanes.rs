@@ -1,0 +1,867 @@
+//! The common path of [`grain_grain_hinted`] for four pairs side by side, in AVX registers
+//! (issue #16): two contours that were in contact last step, whose chains' ends moved by at
+//! most one node and whose crossings lie on, or next to, the edges of j they lay on last step.
+//!
+//! Nearly every contact of a dense packing takes that path every step, and one pair at a time
+//! it is a long chain of dependent loads, products and branches. Here its arithmetic runs in
+//! the four lanes of AVX vectors, each lane's choices made by masks and blends. Every quantity
+//! is computed with the operations of the one-pair path, in its order (products and sums as
+//! glam computes them), so that a lane gives that path's bits; a lane that would leave the path
+//! (an end that moved further, a node in the thin ring where the inside test needs its sector,
+//! a crossing two edges off its guess, a chord shorter than rounding, ...) is reported as such,
+//! and its pair is computed by [`grain_grain_hinted`] itself. Which pairs share a block
+//! therefore changes nothing. Without AVX every pair takes the one-pair path.
+
+use super::contour::{ContourTable, GrainShape};
+use super::intersection::{ContactGeometry, PairHint};
+
+#[cfg(doc)]
+use super::intersection::grain_grain_hinted;
+
+/// Pairs in a block of [`grain_grain_block`]: one AVX register's worth.
+pub const BLOCK: usize = 4;
+
+/// One grain of a pair as a block reads it: its centre, its map `A R` by columns and its
+/// bounding radius (see [`GrainShape`]), and a zero that completes the second vector.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(32))]
+pub struct LaneShape([f64; 8]);
+
+impl LaneShape {
+    #[inline(always)]
+    pub fn of(shape: &GrainShape) -> Self {
+        let (c, m) = (shape.center, shape.map);
+        Self([
+            c.x,
+            c.y,
+            m.x_axis.x,
+            m.x_axis.y,
+            m.y_axis.x,
+            m.y_axis.y,
+            shape.bounding_radius,
+            0.0,
+        ])
+    }
+}
+
+/// One pair of a block: the two shapes (j's centre at the image that meets i), whether j is a
+/// circle (whose inverse map the one-pair path takes as `1/r` times the identity: such pairs
+/// leave the path), and the pair's hint from last step.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LanePair {
+    pub i: LaneShape,
+    pub j: LaneShape,
+    pub j_circle: bool,
+    pub hint: PairHint,
+}
+
+impl LanePair {
+    #[inline(always)]
+    pub fn new(i: &GrainShape, j: &GrainShape, hint: PairHint) -> Self {
+        Self {
+            i: LaneShape::of(i),
+            j: LaneShape::of(j),
+            j_circle: j.circle,
+            hint,
+        }
+    }
+}
+
+/// What a lane found: the pair's contact and its hint for next step, or `None` where the pair
+/// leaves the common path (then [`grain_grain_hinted`] decides, from the old hint).
+pub type LaneContact = Option<(ContactGeometry, PairHint)>;
+
+/// Whether this processor runs [`grain_grain_block`]'s lanes (else every lane is `None`).
+pub fn block_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        return true;
+    }
+    false
+}
+
+/// The contacts of [`BLOCK`] pairs on the common path (see the module's docs): each `Some` is
+/// what [`grain_grain_hinted`] returns for that pair (always a contact there) and the hint it
+/// leaves; `None` where the pair leaves the path, or every lane without AVX. Out of line, so
+/// that the lanes stay in vector registers.
+#[inline(never)]
+pub fn grain_grain_block(
+    table: &ContourTable,
+    pairs: &[LanePair; BLOCK],
+    contacts: &mut [LaneContact; BLOCK],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the processor has AVX (tested just above).
+        unsafe { avx::grain_grain_block(table, pairs, contacts) };
+        return;
+    }
+    let _ = (table, pairs);
+    *contacts = [None; BLOCK];
+}
+
+// The helpers are `unsafe` for they run AVX instructions: every one is inlined into
+// `avx::grain_grain_block`, which is compiled for AVX and called only where the processor has it.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_op_in_unsafe_fn)]
+mod avx {
+    use super::{BLOCK, LaneContact, LanePair};
+    use crate::geometry::contour::{ContourTable, Edge};
+    use crate::geometry::intersection::{ChainHint, ContactGeometry, PairHint};
+    use glam::DVec2;
+    use std::arch::x86_64::*;
+
+    type V = __m256d;
+
+    #[derive(Clone, Copy)]
+    struct V2 {
+        x: V,
+        y: V,
+    }
+
+    /// A 2×2 matrix by columns, as glam's `DMat2`: `(x0, x1)` its first column.
+    #[derive(Clone, Copy)]
+    struct M2 {
+        x0: V,
+        x1: V,
+        y0: V,
+        y1: V,
+    }
+
+    #[inline(always)]
+    unsafe fn lanes(v: V) -> [f64; 4] {
+        // SAFETY: both are 32 bytes of four f64s, lane 0 first.
+        unsafe { std::mem::transmute::<V, [f64; 4]>(v) }
+    }
+
+    #[inline(always)]
+    unsafe fn vector(a: [f64; 4]) -> V {
+        _mm256_set_pd(a[3], a[2], a[1], a[0])
+    }
+
+    /// All bits set in the lanes where `m[l]` holds: a blend mask.
+    #[inline(always)]
+    unsafe fn mask(m: [bool; 4]) -> V {
+        let bits = |b: bool| if b { -1 } else { 0 };
+        _mm256_castsi256_pd(_mm256_set_epi64x(
+            bits(m[3]),
+            bits(m[2]),
+            bits(m[1]),
+            bits(m[0]),
+        ))
+    }
+
+    /// `b` in the lanes of `m`, else `a`.
+    #[inline(always)]
+    unsafe fn blend(a: V2, b: V2, m: V) -> V2 {
+        V2 {
+            x: _mm256_blendv_pd(a.x, b.x, m),
+            y: _mm256_blendv_pd(a.y, b.y, m),
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn bits(v: V) -> [bool; 4] {
+        let m = _mm256_movemask_pd(v);
+        [m & 1 != 0, m & 2 != 0, m & 4 != 0, m & 8 != 0]
+    }
+
+    #[inline(always)]
+    unsafe fn neg(v: V) -> V {
+        _mm256_xor_pd(v, _mm256_set1_pd(-0.0))
+    }
+
+    #[inline(always)]
+    unsafe fn add(a: V2, b: V2) -> V2 {
+        V2 {
+            x: _mm256_add_pd(a.x, b.x),
+            y: _mm256_add_pd(a.y, b.y),
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn sub(a: V2, b: V2) -> V2 {
+        V2 {
+            x: _mm256_sub_pd(a.x, b.x),
+            y: _mm256_sub_pd(a.y, b.y),
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn scale(a: V2, s: V) -> V2 {
+        V2 {
+            x: _mm256_mul_pd(a.x, s),
+            y: _mm256_mul_pd(a.y, s),
+        }
+    }
+
+    /// glam's `dot`: `(a.x b.x) + (a.y b.y)`.
+    #[inline(always)]
+    unsafe fn dot(a: V2, b: V2) -> V {
+        _mm256_add_pd(_mm256_mul_pd(a.x, b.x), _mm256_mul_pd(a.y, b.y))
+    }
+
+    /// glam's `perp_dot`: `(a.x b.y) - (a.y b.x)`.
+    #[inline(always)]
+    unsafe fn perp_dot(a: V2, b: V2) -> V {
+        _mm256_sub_pd(_mm256_mul_pd(a.x, b.y), _mm256_mul_pd(a.y, b.x))
+    }
+
+    /// glam's `DMat2 * DVec2`: `(x0 v.x) + (y0 v.y)`, `(x1 v.x) + (y1 v.y)`.
+    #[inline(always)]
+    unsafe fn mul_vec(m: M2, v: V2) -> V2 {
+        V2 {
+            x: _mm256_add_pd(_mm256_mul_pd(m.x0, v.x), _mm256_mul_pd(m.y0, v.y)),
+            y: _mm256_add_pd(_mm256_mul_pd(m.x1, v.x), _mm256_mul_pd(m.y1, v.y)),
+        }
+    }
+
+    /// glam's `m.transpose() * v`.
+    #[inline(always)]
+    unsafe fn transpose_mul_vec(m: M2, v: V2) -> V2 {
+        mul_vec(
+            M2 {
+                x0: m.x0,
+                x1: m.y0,
+                y0: m.x1,
+                y1: m.y1,
+            },
+            v,
+        )
+    }
+
+    /// glam's `DMat2 * DMat2`: the left matrix times each column.
+    #[inline(always)]
+    unsafe fn mul_mat(a: M2, b: M2) -> M2 {
+        let x = mul_vec(a, V2 { x: b.x0, y: b.x1 });
+        let y = mul_vec(a, V2 { x: b.y0, y: b.y1 });
+        M2 {
+            x0: x.x,
+            x1: x.y,
+            y0: y.x,
+            y1: y.y,
+        }
+    }
+
+    /// glam's `determinant`: `x0 y1 - x1 y0`.
+    #[inline(always)]
+    unsafe fn determinant(m: M2) -> V {
+        _mm256_sub_pd(_mm256_mul_pd(m.x0, m.y1), _mm256_mul_pd(m.x1, m.y0))
+    }
+
+    /// glam's `inverse`: through `1 / det`, the off-diagonal times `-(1 / det)`.
+    #[inline(always)]
+    unsafe fn inverse(m: M2) -> M2 {
+        let inv_det = _mm256_div_pd(_mm256_set1_pd(1.0), determinant(m));
+        let minus = neg(inv_det);
+        M2 {
+            x0: _mm256_mul_pd(m.y1, inv_det),
+            x1: _mm256_mul_pd(m.x1, minus),
+            y0: _mm256_mul_pd(m.y0, minus),
+            y1: _mm256_mul_pd(m.x0, inv_det),
+        }
+    }
+
+    /// Four consecutive nodes of the unit polygon in each lane, `start[l]` to `start[l] + 3`
+    /// (all in [-N, 2N)): each lane's 64 bytes of the ring loaded as two vectors, and the four
+    /// lanes transposed.
+    #[inline(always)]
+    unsafe fn ring4(table: &ContourTable, start: [isize; 4]) -> [V2; 4] {
+        let ring = table.vertex_ring().as_ptr();
+        let nodes = table.nodes as isize;
+        // SAFETY (the caller's): start + N >= 0 and start + 3 + N < 3N, within the ring.
+        let (a, b, c, d) = (
+            ring.offset(start[0] + nodes).cast::<f64>(),
+            ring.offset(start[1] + nodes).cast::<f64>(),
+            ring.offset(start[2] + nodes).cast::<f64>(),
+            ring.offset(start[3] + nodes).cast::<f64>(),
+        );
+        let [n0, n1] = transpose_pairs(
+            _mm256_loadu_pd(a),
+            _mm256_loadu_pd(b),
+            _mm256_loadu_pd(c),
+            _mm256_loadu_pd(d),
+        );
+        let [n2, n3] = transpose_pairs(
+            _mm256_loadu_pd(a.add(4)),
+            _mm256_loadu_pd(b.add(4)),
+            _mm256_loadu_pd(c.add(4)),
+            _mm256_loadu_pd(d.add(4)),
+        );
+        [n0, n1, n2, n3]
+    }
+
+    /// Two points of each of four lanes, `(x0 y0 x1 y1)` a lane, as two points of four lanes.
+    #[inline(always)]
+    unsafe fn transpose_pairs(a: V, b: V, c: V, d: V) -> [V2; 2] {
+        // (x0 of a and b, x1 of a and b), and the same of y, c and d.
+        let (ab_x, ab_y) = (_mm256_unpacklo_pd(a, b), _mm256_unpackhi_pd(a, b));
+        let (cd_x, cd_y) = (_mm256_unpacklo_pd(c, d), _mm256_unpackhi_pd(c, d));
+        [
+            V2 {
+                x: _mm256_permute2f128_pd::<0x20>(ab_x, cd_x),
+                y: _mm256_permute2f128_pd::<0x20>(ab_y, cd_y),
+            },
+            V2 {
+                x: _mm256_permute2f128_pd::<0x31>(ab_x, cd_x),
+                y: _mm256_permute2f128_pd::<0x31>(ab_y, cd_y),
+            },
+        ]
+    }
+
+    #[inline(always)]
+    fn offset(k: [isize; 4], d: isize) -> [isize; 4] {
+        [k[0] + d, k[1] + d, k[2] + d, k[3] + d]
+    }
+
+    /// The inside tests of `ContourTable::contains` that need no sector, as bit masks of the
+    /// lanes: inside the inscribed circle, and outside the circumscribed one (a point in the
+    /// ring between them, or a NaN, is in neither).
+    #[inline(always)]
+    unsafe fn inside_outside(table: &ContourTable, u: V2) -> (i32, i32) {
+        let r2 = dot(u, u);
+        (
+            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(
+                r2,
+                _mm256_set1_pd(table.apothem_squared),
+            )),
+            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(r2, _mm256_set1_pd(1.0))),
+        )
+    }
+
+    /// The ends of one chain of last step (`end`, its chain running on from it against
+    /// `outward`): its nodes `end + c outward`, c = -1..=2, mapped into the other grain's frame
+    /// (`u = m v + t`), and where the end is now, as the one-pair path's `end_moved` settles
+    /// it: the offset of the new end along `outward` (-1, 0 or 1), or `None` where it moved
+    /// further or a node it tests lies in the ring between the inscribed and circumscribed
+    /// circles (where the inside test needs the node's sector).
+    #[inline(always)]
+    unsafe fn end_moved(
+        table: &ContourTable,
+        m: M2,
+        t: V2,
+        end: [isize; 4],
+        outward: isize,
+    ) -> ([V2; 4], [V2; 4], [Option<isize>; 4]) {
+        // The four nodes lie together in memory: from end - 1 up for the hi end (outward
+        // 1), from end - 2 up, in the reverse order, for the lo end.
+        let raw = if outward == 1 {
+            ring4(table, offset(end, -1))
+        } else {
+            let [a, b, c, d] = ring4(table, offset(end, -2));
+            [d, c, b, a]
+        };
+        let nodes = [
+            add(mul_vec(m, raw[0]), t),
+            add(mul_vec(m, raw[1]), t),
+            add(mul_vec(m, raw[2]), t),
+            add(mul_vec(m, raw[3]), t),
+        ];
+        let (back_inside, _) = inside_outside(table, nodes[0]);
+        let (at_end_inside, at_end_outside) = inside_outside(table, nodes[1]);
+        let (beyond_inside, beyond_outside) = inside_outside(table, nodes[2]);
+        let (_, further_outside) = inside_outside(table, nodes[3]);
+        // The end moved back (its node left, the one behind it is in), stayed, or moved on
+        // (the node beyond came in, the one after it is out): bit l of each for lane l.
+        let back = at_end_outside & back_inside;
+        let stayed = at_end_inside & beyond_outside;
+        let on = at_end_inside & beyond_inside & further_outside;
+        let mut moved = [None; 4];
+        for (l, moved) in moved.iter_mut().enumerate() {
+            let bit = 1 << l;
+            *moved = if back & bit != 0 {
+                Some(-1)
+            } else if stayed & bit != 0 {
+                Some(0)
+            } else if on & bit != 0 {
+                Some(1)
+            } else {
+                None
+            };
+        }
+        (raw, nodes, moved)
+    }
+
+    /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and the end's
+    /// offsets.
+    #[inline(always)]
+    unsafe fn end_and_beyond(nodes: &[V2; 4], moved: &[isize; 4]) -> (V2, V2) {
+        let back = mask([
+            moved[0] == -1,
+            moved[1] == -1,
+            moved[2] == -1,
+            moved[3] == -1,
+        ]);
+        let on = mask([moved[0] == 1, moved[1] == 1, moved[2] == 1, moved[3] == 1]);
+        (
+            blend(blend(nodes[1], nodes[0], back), nodes[2], on),
+            blend(blend(nodes[2], nodes[1], back), nodes[3], on),
+        )
+    }
+
+    /// b's unit-polygon edges `s[l]`: starts, ends and outward normals.
+    #[inline(always)]
+    unsafe fn edges(table: &ContourTable, s: [usize; 4]) -> [V2; 3] {
+        // SAFETY: an edge is its start, end and normal, six f64s in this order (`repr(C)`).
+        let e = [
+            (table.edge(s[0]) as *const Edge).cast::<f64>(),
+            (table.edge(s[1]) as *const Edge).cast::<f64>(),
+            (table.edge(s[2]) as *const Edge).cast::<f64>(),
+            (table.edge(s[3]) as *const Edge).cast::<f64>(),
+        ];
+        let [start, end] = transpose_pairs(
+            _mm256_loadu_pd(e[0]),
+            _mm256_loadu_pd(e[1]),
+            _mm256_loadu_pd(e[2]),
+            _mm256_loadu_pd(e[3]),
+        );
+        // (normal 0 | normal 2) and (normal 1 | normal 3), interleaved into x's and y's. (No
+        // closure here: a closure is not compiled for AVX, and its intrinsics become calls.)
+        let n02 = _mm256_insertf128_pd::<1>(
+            _mm256_castpd128_pd256(_mm_loadu_pd(e[0].add(4))),
+            _mm_loadu_pd(e[2].add(4)),
+        );
+        let n13 = _mm256_insertf128_pd::<1>(
+            _mm256_castpd128_pd256(_mm_loadu_pd(e[1].add(4))),
+            _mm_loadu_pd(e[3].add(4)),
+        );
+        let normal = V2 {
+            x: _mm256_unpacklo_pd(n02, n13),
+            y: _mm256_unpackhi_pd(n02, n13),
+        };
+        [start, end, normal]
+    }
+
+    /// Where a's edge from its node inside b (`p_in`, in b's reference coordinates) to the
+    /// node outside (`p_out`) leaves b's polygon, when it leaves through b's edge `guess` or a
+    /// neighbour of it: the exit parameter and b's edge, as the one-pair path's
+    /// `crossing_and_edge` finds them on its first or second try; `false` in `found` where
+    /// that path would try further, or search.
+    #[inline(always)]
+    unsafe fn exit_near(
+        table: &ContourTable,
+        p_in: V2,
+        p_out: V2,
+        guess: [usize; 4],
+    ) -> (V, [usize; 4], [bool; 4], [V2; 2]) {
+        let direction = sub(p_out, p_in);
+        let apothem = _mm256_set1_pd(table.apothem);
+        let zero = _mm256_setzero_pd();
+        let mut edge = guess;
+        let mut t = [0.0; 4];
+        let mut found = [false; 4];
+        let mut open = [true; 4];
+        let mut ends = [V2 { x: zero, y: zero }; 2];
+        for _try in 0..2 {
+            let [start, end, normal] = edges(table, edge);
+            // The ends of each lane's edge (the first try's, or the second's where it tried
+            // again): a chain of j runs between two of them.
+            let tried = mask(open);
+            ends = [blend(ends[0], start, tried), blend(ends[1], end, tried)];
+            let rate = dot(direction, normal);
+            let t_try = _mm256_div_pd(_mm256_sub_pd(apothem, dot(p_in, normal)), rate);
+            let q = add(p_in, scale(direction, t_try));
+            let rising = bits(_mm256_cmp_pd::<_CMP_GT_OQ>(rate, zero));
+            let after_start = bits(_mm256_cmp_pd::<_CMP_GE_OQ>(perp_dot(start, q), zero));
+            let before_end = bits(_mm256_cmp_pd::<_CMP_LE_OQ>(perp_dot(end, q), zero));
+            let t_try = lanes(t_try);
+            for l in 0..4 {
+                if !open[l] {
+                    continue;
+                }
+                if !rising[l] {
+                    open[l] = false;
+                } else if after_start[l] && before_end[l] {
+                    open[l] = false;
+                    found[l] = t_try[l] > 0.0 && t_try[l] <= 1.0;
+                    t[l] = t_try[l];
+                } else {
+                    edge[l] = if after_start[l] {
+                        table.next(edge[l])
+                    } else {
+                        table.previous(edge[l])
+                    };
+                }
+            }
+            if !open.contains(&true) {
+                break;
+            }
+        }
+        (vector(t), edge, found, ends)
+    }
+
+    /// The crossing on a's edge from its node `v_in` to `v_out` (reference coordinates) at
+    /// parameter `t`, in global coordinates: `c + A R (v_in + (v_out - v_in) t)`.
+    #[inline(always)]
+    unsafe fn crossing(center: V2, map: M2, v_in: V2, v_out: V2, t: V) -> V2 {
+        add(center, mul_vec(map, add(v_in, scale(sub(v_out, v_in), t))))
+    }
+
+    /// The one-pair path's `cap_area_and_depth` for chains `lo..=hi` of a grain (`center`,
+    /// `map`): the area of its cap (from, chain, to) and the depth of its deepest node beyond
+    /// `origin` along `outward`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    unsafe fn cap_area_and_depth(
+        table: &ContourTable,
+        center: V2,
+        map: M2,
+        (lo, hi): ([isize; 4], [isize; 4]),
+        (vertex_lo, vertex_hi): (V2, V2),
+        from: V2,
+        to: V2,
+        origin: V2,
+        outward: V2,
+    ) -> (V, [f64; 4]) {
+        let first = mul_vec(map, vertex_lo);
+        let last = mul_vec(map, vertex_hi);
+        let (from, to) = (sub(from, center), sub(to, center));
+        let spanned = vector([
+            (hi[0] - lo[0]) as f64,
+            (hi[1] - lo[1]) as f64,
+            (hi[2] - lo[2]) as f64,
+            (hi[3] - lo[3]) as f64,
+        ]);
+        let fan = _mm256_mul_pd(
+            _mm256_mul_pd(spanned, determinant(map)),
+            _mm256_set1_pd(table.sin_dbeta),
+        );
+        let twice_area = _mm256_add_pd(
+            _mm256_add_pd(
+                _mm256_add_pd(perp_dot(from, first), fan),
+                perp_dot(last, to),
+            ),
+            perp_dot(to, from),
+        );
+        // The deepest node is one of the two or three around the chain's middle (see the
+        // one-pair path); the last is repeated where there are fewer.
+        let mut start = [0; 4];
+        let mut count = [0; 4];
+        for l in 0..4 {
+            let sum = lo[l] + hi[l];
+            let middle = sum >> 1;
+            start[l] = (middle - 1 + (sum & 1)).max(lo[l]);
+            count[l] = (middle + 1).min(hi[l]) - start[l] + 1;
+        }
+        let support = transpose_mul_vec(map, outward);
+        let around = ring4(table, start);
+        let mut reach = dot(around[0], support);
+        for (k, node) in around.iter().enumerate().take(3).skip(1) {
+            let r = dot(*node, support);
+            let k = k as isize;
+            let further = _mm256_and_pd(
+                _mm256_cmp_pd::<_CMP_GT_OQ>(r, reach),
+                mask([count[0] > k, count[1] > k, count[2] > k, count[3] > k]),
+            );
+            reach = _mm256_blendv_pd(reach, r, further);
+        }
+        let mut depth = lanes(_mm256_add_pd(dot(sub(center, origin), outward), reach));
+        for d in depth.iter_mut() {
+            *d = d.max(0.0);
+        }
+        (_mm256_mul_pd(_mm256_set1_pd(0.5), twice_area), depth)
+    }
+
+    /// A grain's centre, map and bounding radius, side i or j of each pair.
+    #[inline(always)]
+    unsafe fn shapes(pairs: &[LanePair; BLOCK], second: bool) -> (V2, M2, V) {
+        let side = |l: usize| {
+            let shape = if second { &pairs[l].j } else { &pairs[l].i };
+            shape.0.as_ptr()
+        };
+        let (a, b, c, d) = (side(0), side(1), side(2), side(3));
+        // SAFETY: each shape is eight f64s.
+        let [center, x_axis] = transpose_pairs(
+            _mm256_loadu_pd(a),
+            _mm256_loadu_pd(b),
+            _mm256_loadu_pd(c),
+            _mm256_loadu_pd(d),
+        );
+        let [y_axis, radius] = transpose_pairs(
+            _mm256_loadu_pd(a.add(4)),
+            _mm256_loadu_pd(b.add(4)),
+            _mm256_loadu_pd(c.add(4)),
+            _mm256_loadu_pd(d.add(4)),
+        );
+        (
+            center,
+            M2 {
+                x0: x_axis.x,
+                x1: x_axis.y,
+                y0: y_axis.x,
+                y1: y_axis.y,
+            },
+            radius.x,
+        )
+    }
+
+    #[target_feature(enable = "avx")]
+    pub(super) unsafe fn grain_grain_block(
+        table: &ContourTable,
+        pairs: &[LanePair; BLOCK],
+        out: &mut [LaneContact; BLOCK],
+    ) {
+        let n = table.nodes as isize;
+        let half = n / 2;
+        // Lanes on the path so far; a lane that leaves it computes on with safe indices.
+        let mut on_path = [false; 4];
+        // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
+        // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on
+        // (lo - 1, lo).
+        let mut lo = [0; 4];
+        let mut hi = [0; 4];
+        let mut guess_lo = [0; 4];
+        let mut guess_hi = [0; 4];
+        for l in 0..4 {
+            let PairHint { first, second } = pairs[l].hint;
+            let (chain_lo, mut chain_hi) = (first.lo as isize, first.hi as isize);
+            if chain_hi < chain_lo {
+                chain_hi += n;
+            }
+            if first.lo >= 0 && second.lo >= 0 && !pairs[l].j_circle && chain_hi - chain_lo < half {
+                on_path[l] = true;
+                lo[l] = chain_lo;
+                hi[l] = chain_hi;
+                guess_lo[l] = second.hi as usize;
+                guess_hi[l] = table.previous(second.lo as usize);
+            }
+        }
+
+        let (center_i, map_i, reach_i) = shapes(pairs, false);
+        let (center_j, map_j, reach_j) = shapes(pairs, true);
+        let branch = sub(center_i, center_j);
+        let reach = _mm256_add_pd(reach_i, reach_j);
+        let near = bits(_mm256_cmp_pd::<_CMP_LT_OQ>(
+            dot(branch, branch),
+            _mm256_mul_pd(reach, reach),
+        ));
+        let inv_j = inverse(map_j);
+        let m = mul_mat(inv_j, map_i);
+        let t = mul_vec(inv_j, branch);
+
+        // The lo end runs outward to lower indices, the hi end to higher ones.
+        let (raw_lo, nodes_lo, moved_lo) = end_moved(table, m, t, lo, -1);
+        let (raw_hi, nodes_hi, moved_hi) = end_moved(table, m, t, hi, 1);
+        let mut offset_lo = [0; 4];
+        let mut offset_hi = [0; 4];
+        for l in 0..4 {
+            match (moved_lo[l], moved_hi[l]) {
+                (Some(d_lo), Some(d_hi)) if near[l] => {
+                    let (new_lo, new_hi) = (lo[l] - d_lo, hi[l] + d_hi);
+                    if new_hi < new_lo || new_hi - new_lo >= half {
+                        on_path[l] = false;
+                    } else {
+                        (offset_lo[l], offset_hi[l]) = (d_lo, d_hi);
+                    }
+                }
+                _ => on_path[l] = false,
+            }
+            lo[l] -= offset_lo[l];
+            hi[l] += offset_hi[l];
+        }
+        let (lo_in, lo_out) = end_and_beyond(&nodes_lo, &offset_lo);
+        let (hi_in, hi_out) = end_and_beyond(&nodes_hi, &offset_hi);
+        // The same nodes in i's reference coordinates.
+        let (vertex_lo, vertex_lo_out) = end_and_beyond(&raw_lo, &offset_lo);
+        let (vertex_hi, vertex_hi_out) = end_and_beyond(&raw_hi, &offset_hi);
+
+        let (t_lo, edge_lo, found_lo, ends_lo) = exit_near(table, lo_in, lo_out, guess_lo);
+        let (t_hi, edge_hi, found_hi, ends_hi) = exit_near(table, hi_in, hi_out, guess_hi);
+        let p_lo = crossing(center_i, map_i, vertex_lo, vertex_lo_out, t_lo);
+        let p_hi = crossing(center_i, map_i, vertex_hi, vertex_hi_out, t_hi);
+        // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
+        let mut j_lo = [0; 4];
+        let mut j_hi = [0; 4];
+        let mut j_chain = [false; 4];
+        for l in 0..4 {
+            on_path[l] &= found_lo[l] && found_hi[l];
+            if on_path[l] && edge_lo[l] != edge_hi[l] {
+                let first = table.next(edge_hi[l]) as isize;
+                let last = edge_lo[l] as isize;
+                j_chain[l] = true;
+                j_lo[l] = first;
+                j_hi[l] = if last < first { last + n } else { last };
+            }
+        }
+
+        // The chord (the one-pair path's `Chord::between`).
+        let chord = sub(p_hi, p_lo);
+        let length = _mm256_sqrt_pd(dot(chord, chord));
+        let normal = V2 {
+            x: _mm256_div_pd(chord.y, length),
+            y: neg(_mm256_div_pd(chord.x, length)),
+        };
+        let point = scale(add(p_lo, p_hi), _mm256_set1_pd(0.5));
+
+        let (cap_area_i, depth_i) = cap_area_and_depth(
+            table,
+            center_i,
+            map_i,
+            (lo, hi),
+            (vertex_lo, vertex_hi),
+            p_lo,
+            p_hi,
+            point,
+            normal,
+        );
+        let minus_normal = V2 {
+            x: neg(normal.x),
+            y: neg(normal.y),
+        };
+        let (cap_area_j, depth_j) = cap_area_and_depth(
+            table,
+            center_j,
+            map_j,
+            (j_lo, j_hi),
+            // j's chain runs from the end of p_hi's edge to the start of p_lo's.
+            (ends_hi[1], ends_lo[0]),
+            p_hi,
+            p_lo,
+            point,
+            minus_normal,
+        );
+        let (length, cap_area_i, cap_area_j) =
+            (lanes(length), lanes(cap_area_i), lanes(cap_area_j));
+        let (reach_i, reach_j) = (lanes(reach_i), lanes(reach_j));
+        let (point, normal) = (
+            [lanes(point.x), lanes(point.y)],
+            [lanes(normal.x), lanes(normal.y)],
+        );
+
+        for l in 0..4 {
+            out[l] = None;
+            let shortest = f64::EPSILON * reach_i[l].min(reach_j[l]);
+            if !on_path[l] || length[l] <= shortest {
+                continue;
+            }
+            let wrap = |k: isize| table.wrap(k) as i32;
+            // Without a chain of j its cap and depth are zero.
+            let (cap_area_j, depth_j, second) = if j_chain[l] {
+                let second = ChainHint {
+                    lo: wrap(j_lo[l]),
+                    hi: wrap(j_hi[l]),
+                };
+                (cap_area_j[l], depth_j[l], second)
+            } else {
+                (0.0, 0.0, ChainHint::NONE)
+            };
+            out[l] = Some((
+                ContactGeometry {
+                    point: DVec2::new(point[0][l], point[1][l]),
+                    normal: DVec2::new(normal[0][l], normal[1][l]),
+                    length: length[l],
+                    cap_area_i: cap_area_i[l],
+                    cap_area_j,
+                    normal_gap: -0.5 * (depth_i[l] + depth_j),
+                },
+                PairHint {
+                    first: ChainHint {
+                        lo: wrap(lo[l]),
+                        hi: wrap(hi[l]),
+                    },
+                    second,
+                },
+            ));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::intersection::tests::unit_randoms;
+    use crate::geometry::{Overlap, grain_grain_hinted};
+    use glam::DVec2;
+
+    /// A pair in contact, given by the grains' states, and the same pair a small step later.
+    fn pair_and_its_next_step(
+        next: &mut impl FnMut() -> f64,
+        step: f64,
+    ) -> (GrainShape, GrainShape, GrainShape, GrainShape) {
+        let state = |next: &mut dyn FnMut() -> f64, strain: f64| {
+            [
+                6.0 * next(),
+                strain * (2.0 * next() - 1.0),
+                strain * (2.0 * next() - 1.0),
+                6.0 * next(),
+            ]
+        };
+        let [ti, e1i, e2i, ai] = state(next, 0.2);
+        let rj = 0.3 + 1.2 * next();
+        let [tj, e1j, e2j, aj] = state(next, 0.15);
+        let direction = DVec2::from_angle(6.3 * next());
+        let cj = direction * (1.0 + rj) * (0.8 + 0.2 * next());
+        let i = GrainShape::new(DVec2::ZERO, 1.0, ti, e1i, e2i, ai);
+        let j = GrainShape::new(cj, rj, tj, e1j, e2j, aj);
+        let mut nudge = || step * (2.0 * next() - 1.0);
+        let i_next = GrainShape::new(
+            DVec2::new(nudge(), nudge()),
+            1.0,
+            ti + nudge(),
+            e1i + nudge(),
+            e2i + nudge(),
+            ai + nudge(),
+        );
+        let j_next = GrainShape::new(
+            cj + DVec2::new(nudge(), nudge()),
+            rj,
+            tj + nudge(),
+            e1j + nudge(),
+            e2j + nudge(),
+            aj + nudge(),
+        );
+        (i, j, i_next, j_next)
+    }
+
+    #[test]
+    fn lanes_give_the_one_pair_paths_contact_and_hint_bit_for_bit() {
+        // Expectation: a lane on the common path returns exactly what `grain_grain_hinted`
+        // returns for its pair from the same hint (contact and next hint), whatever the lane and
+        // the pairs beside it; and most pairs a step after a contact take that path.
+        if !block_available() {
+            return;
+        }
+        let table = ContourTable::new(1.0);
+        let mut next = unit_randoms(23);
+        let (mut on_path, mut total) = (0, 0);
+        for step in [1e-4, 1e-3, 1e-2, 3e-2] {
+            let (on_before, total_before) = (on_path, total);
+            let mut pairs = Vec::new();
+            for _ in 0..600 {
+                let (i, j, i_next, j_next) = pair_and_its_next_step(&mut next, step);
+                let mut hint = PairHint::default();
+                if let Overlap::Contact(_) = grain_grain_hinted(&table, &i, &j, &mut hint) {
+                    pairs.push((LanePair::new(&i_next, &j_next, hint), i_next, j_next));
+                }
+            }
+            for (block, rotation) in pairs.chunks_exact(4).zip(0..) {
+                let mut block: [_; BLOCK] = block.try_into().unwrap();
+                block.rotate_left(rotation % BLOCK);
+                let lanes = block.map(|(lane, _, _)| lane);
+                let mut contacts = [None; BLOCK];
+                grain_grain_block(&table, &lanes, &mut contacts);
+                for (l, (pair, i, j)) in block.iter().enumerate() {
+                    let mut hint = pair.hint;
+                    let one = grain_grain_hinted(&table, i, j, &mut hint);
+                    total += 1;
+                    if let Some((contact, next_hint)) = contacts[l] {
+                        assert_eq!(one, Overlap::Contact(contact), "lane {l}");
+                        assert_eq!(hint, next_hint, "lane {l}");
+                        on_path += 1;
+                    }
+                }
+            }
+            // Moves of a ten-thousandth of a radius, a step's in a dense packing: nearly every
+            // pair stays on the path.
+            if step == 1e-4 {
+                let (on, of) = (on_path - on_before, total - total_before);
+                assert!(of > 400 && on * 10 > 9 * of, "{on} of {of} on the path");
+            }
+        }
+        assert!(total > 1500, "{total}");
+        assert!(
+            on_path * 4 < total * 3,
+            "{on_path} of {total}: the fallback is seldom tested"
+        );
+    }
+}
