@@ -276,19 +276,21 @@ mod avx {
             ring.offset(start[2] + nodes).cast::<f64>(),
             ring.offset(start[3] + nodes).cast::<f64>(),
         );
-        let [n0, n1] = transpose_pairs(
-            _mm256_loadu_pd(a),
-            _mm256_loadu_pd(b),
-            _mm256_loadu_pd(c),
-            _mm256_loadu_pd(d),
-        );
-        let [n2, n3] = transpose_pairs(
-            _mm256_loadu_pd(a.add(4)),
-            _mm256_loadu_pd(b.add(4)),
-            _mm256_loadu_pd(c.add(4)),
-            _mm256_loadu_pd(d.add(4)),
-        );
+        let [n0, n1] = load_pairs([a, b, c, d], 0);
+        let [n2, n3] = load_pairs([a, b, c, d], 4);
         [n0, n1, n2, n3]
+    }
+
+    /// Four f64s from `lane[l] + at` in each lane `l`, read as two points of four lanes (see
+    /// [`transpose_pairs`]).
+    #[inline(always)]
+    unsafe fn load_pairs(lane: [*const f64; 4], at: usize) -> [V2; 2] {
+        transpose_pairs(
+            _mm256_loadu_pd(lane[0].add(at)),
+            _mm256_loadu_pd(lane[1].add(at)),
+            _mm256_loadu_pd(lane[2].add(at)),
+            _mm256_loadu_pd(lane[3].add(at)),
+        )
     }
 
     /// Two points of each of four lanes, `(x0 y0 x1 y1)` a lane, as two points of four lanes.
@@ -409,12 +411,7 @@ mod avx {
             (table.edge(s[2]) as *const Edge).cast::<f64>(),
             (table.edge(s[3]) as *const Edge).cast::<f64>(),
         ];
-        let [start, end] = transpose_pairs(
-            _mm256_loadu_pd(e[0]),
-            _mm256_loadu_pd(e[1]),
-            _mm256_loadu_pd(e[2]),
-            _mm256_loadu_pd(e[3]),
-        );
+        let [start, end] = load_pairs(e, 0);
         // (normal 0 | normal 2) and (normal 1 | normal 3), interleaved into x's and y's. (No
         // closure here: a closure is not compiled for AVX, and its intrinsics become calls.)
         let n02 = _mm256_insertf128_pd::<1>(
@@ -571,18 +568,8 @@ mod avx {
         };
         let (a, b, c, d) = (side(0), side(1), side(2), side(3));
         // SAFETY: each shape is eight f64s.
-        let [center, x_axis] = transpose_pairs(
-            _mm256_loadu_pd(a),
-            _mm256_loadu_pd(b),
-            _mm256_loadu_pd(c),
-            _mm256_loadu_pd(d),
-        );
-        let [y_axis, radius] = transpose_pairs(
-            _mm256_loadu_pd(a.add(4)),
-            _mm256_loadu_pd(b.add(4)),
-            _mm256_loadu_pd(c.add(4)),
-            _mm256_loadu_pd(d.add(4)),
-        );
+        let [center, x_axis] = load_pairs([a, b, c, d], 0);
+        let [y_axis, radius] = load_pairs([a, b, c, d], 4);
         (
             center,
             M2 {
