@@ -262,14 +262,17 @@ mod avx {
         }
     }
 
-    /// Four consecutive nodes of the unit polygon in each lane, `start[l]` to `start[l] + 3`
-    /// (all in [-N, 2N)): each lane's 64 bytes of the ring loaded as two vectors, and the four
-    /// lanes transposed.
+    /// Four consecutive nodes of the unit polygon in each lane, `start[l]` to `start[l] + 3`:
+    /// each lane's 64 bytes of the ring loaded as two vectors, and the four lanes transposed.
+    ///
+    /// # Safety
+    /// Every `start[l]` lies in [-N, 2N - 3), so that the four nodes lie within the ring
+    /// (see `grain_grain_block` for why the kernel's do), and the processor has AVX.
     #[inline(always)]
     unsafe fn ring4(table: &ContourTable, start: [isize; 4]) -> [V2; 4] {
         let ring = table.vertex_ring().as_ptr();
         let nodes = table.nodes as isize;
-        // SAFETY (the caller's): start + N >= 0 and start + 3 + N < 3N, within the ring.
+        debug_assert!(start.iter().all(|&k| -nodes <= k && k + 3 < 2 * nodes));
         let (a, b, c, d) = (
             ring.offset(start[0] + nodes).cast::<f64>(),
             ring.offset(start[1] + nodes).cast::<f64>(),
@@ -384,17 +387,25 @@ mod avx {
         (raw, nodes, moved)
     }
 
-    /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and the end's
-    /// offsets.
+    /// The blend masks of an end's offsets (-1, 0 or 1): the lanes that moved back, and those
+    /// that moved on.
     #[inline(always)]
-    unsafe fn end_and_beyond(nodes: &[V2; 4], moved: &[isize; 4]) -> (V2, V2) {
-        let back = mask([
-            moved[0] == -1,
-            moved[1] == -1,
-            moved[2] == -1,
-            moved[3] == -1,
-        ]);
-        let on = mask([moved[0] == 1, moved[1] == 1, moved[2] == 1, moved[3] == 1]);
+    unsafe fn moved_masks(moved: &[isize; 4]) -> (V, V) {
+        (
+            mask([
+                moved[0] == -1,
+                moved[1] == -1,
+                moved[2] == -1,
+                moved[3] == -1,
+            ]),
+            mask([moved[0] == 1, moved[1] == 1, moved[2] == 1, moved[3] == 1]),
+        )
+    }
+
+    /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and the masks
+    /// of the end's offsets ([`moved_masks`]).
+    #[inline(always)]
+    unsafe fn end_and_beyond(nodes: &[V2; 4], (back, on): (V, V)) -> (V2, V2) {
         (
             blend(blend(nodes[1], nodes[0], back), nodes[2], on),
             blend(blend(nodes[2], nodes[1], back), nodes[3], on),
@@ -590,7 +601,12 @@ mod avx {
     ) {
         let n = table.nodes as isize;
         let half = n / 2;
-        // Lanes on the path so far; a lane that leaves it computes on with safe indices.
+        // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
+        // ring is read without bounds checks (`ring4`), so every node index formed here lies
+        // in [-N, 2N - 3) (N >= 8): a lane starts with hints in [0, N), checked below (a lane
+        // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
+        // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
+        // j's chain runs within [0, 2N) with its middle under 3N / 2.
         let mut on_path = [false; 4];
         // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
         // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on
@@ -605,7 +621,13 @@ mod avx {
             if chain_hi < chain_lo {
                 chain_hi += n;
             }
-            if first.lo >= 0 && second.lo >= 0 && !pairs[l].j_circle && chain_hi - chain_lo < half {
+            // One unsigned comparison each: a negative hint (NONE) wraps above N.
+            let turn = n as u32;
+            let hints_in_turn = (first.lo as u32) < turn
+                && (first.hi as u32) < turn
+                && (second.lo as u32) < turn
+                && (second.hi as u32) < turn;
+            if hints_in_turn && !pairs[l].j_circle && chain_hi - chain_lo < half {
                 on_path[l] = true;
                 lo[l] = chain_lo;
                 hi[l] = chain_hi;
@@ -646,11 +668,12 @@ mod avx {
             lo[l] -= offset_lo[l];
             hi[l] += offset_hi[l];
         }
-        let (lo_in, lo_out) = end_and_beyond(&nodes_lo, &offset_lo);
-        let (hi_in, hi_out) = end_and_beyond(&nodes_hi, &offset_hi);
+        let (masks_lo, masks_hi) = (moved_masks(&offset_lo), moved_masks(&offset_hi));
+        let (lo_in, lo_out) = end_and_beyond(&nodes_lo, masks_lo);
+        let (hi_in, hi_out) = end_and_beyond(&nodes_hi, masks_hi);
         // The same nodes in i's reference coordinates.
-        let (vertex_lo, vertex_lo_out) = end_and_beyond(&raw_lo, &offset_lo);
-        let (vertex_hi, vertex_hi_out) = end_and_beyond(&raw_hi, &offset_hi);
+        let (vertex_lo, vertex_lo_out) = end_and_beyond(&raw_lo, masks_lo);
+        let (vertex_hi, vertex_hi_out) = end_and_beyond(&raw_hi, masks_hi);
 
         let (t_lo, edge_lo, found_lo, ends_lo) = exit_near(table, lo_in, lo_out, guess_lo);
         let (t_hi, edge_hi, found_hi, ends_hi) = exit_near(table, hi_in, hi_out, guess_hi);
