@@ -139,16 +139,42 @@ mod avx {
         _mm256_set_pd(a[3], a[2], a[1], a[0])
     }
 
-    /// All bits set in the lanes where `m[l]` holds: a blend mask.
+    /// Lanes as bits: bit `l` for lane `l` (what `_mm256_movemask_pd` gives).
+    type Bits = i32;
+
+    /// Every lane.
+    const ALL: Bits = 0b1111;
+
+    /// The blend masks of the sixteen sets of lanes, `BLEND_MASKS[b]` all ones in the lanes of
+    /// `b`: one load where a mask built lane by lane took a branch and an insert a lane.
+    static BLEND_MASKS: [[i64; 4]; 16] = {
+        let mut masks = [[0; 4]; 16];
+        let mut b = 0;
+        while b < 16 {
+            let mut l = 0;
+            while l < 4 {
+                if b & (1 << l) != 0 {
+                    masks[b][l] = -1;
+                }
+                l += 1;
+            }
+            b += 1;
+        }
+        masks
+    };
+
+    /// All bits set in the lanes of `b`: a blend mask.
     #[inline(always)]
-    unsafe fn mask(m: [bool; 4]) -> V {
-        let bits = |b: bool| if b { -1 } else { 0 };
-        _mm256_castsi256_pd(_mm256_set_epi64x(
-            bits(m[3]),
-            bits(m[2]),
-            bits(m[1]),
-            bits(m[0]),
-        ))
+    unsafe fn mask(b: Bits) -> V {
+        debug_assert!((0..16).contains(&b));
+        // SAFETY: `b` lies in [0, 16) (four lanes' bits), and each entry is 32 bytes.
+        _mm256_loadu_pd(BLEND_MASKS.get_unchecked(b as usize).as_ptr().cast::<f64>())
+    }
+
+    /// Whether lane `l` is in `b`.
+    #[inline(always)]
+    fn has(b: Bits, l: usize) -> bool {
+        b & (1 << l) != 0
     }
 
     /// `b` in the lanes of `m`, else `a`.
@@ -160,10 +186,10 @@ mod avx {
         }
     }
 
+    /// The lanes where a comparison's result `v` holds.
     #[inline(always)]
-    unsafe fn bits(v: V) -> [bool; 4] {
-        let m = _mm256_movemask_pd(v);
-        [m & 1 != 0, m & 2 != 0, m & 4 != 0, m & 8 != 0]
+    unsafe fn bits(v: V) -> Bits {
+        _mm256_movemask_pd(v)
     }
 
     #[inline(always)]
@@ -323,23 +349,23 @@ mod avx {
     /// lanes: inside the inscribed circle, and outside the circumscribed one (a point in the
     /// ring between them, or a NaN, is in neither).
     #[inline(always)]
-    unsafe fn inside_outside(table: &ContourTable, u: V2) -> (i32, i32) {
+    unsafe fn inside_outside(table: &ContourTable, u: V2) -> (Bits, Bits) {
         let r2 = dot(u, u);
         (
-            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(
+            bits(_mm256_cmp_pd::<_CMP_LT_OQ>(
                 r2,
                 _mm256_set1_pd(table.apothem_squared),
             )),
-            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(r2, _mm256_set1_pd(1.0))),
+            bits(_mm256_cmp_pd::<_CMP_GE_OQ>(r2, _mm256_set1_pd(1.0))),
         )
     }
 
     /// The ends of one chain of last step (`end`, its chain running on from it against
     /// `outward`): its nodes `end + c outward`, c = -1..=2, mapped into the other grain's frame
     /// (`u = m v + t`), and where the end is now, as the one-pair path's `end_moved` settles
-    /// it: the offset of the new end along `outward` (-1, 0 or 1), or `None` where it moved
-    /// further or a node it tests lies in the ring between the inscribed and circumscribed
-    /// circles (where the inside test needs the node's sector).
+    /// it: the lanes whose end moved back by a node, stayed, or moved on by one ([`Moved`]).
+    /// A lane in none of them moved further, or a node it tests lies in the ring between the
+    /// inscribed and circumscribed circles (where the inside test needs the node's sector).
     #[inline(always)]
     unsafe fn end_moved(
         table: &ContourTable,
@@ -347,7 +373,7 @@ mod avx {
         t: V2,
         end: [isize; 4],
         outward: isize,
-    ) -> ([V2; 4], [V2; 4], [Option<isize>; 4]) {
+    ) -> ([V2; 4], [V2; 4], Moved) {
         // The four nodes lie together in memory: from end - 1 up for the hi end (outward
         // 1), from end - 2 up, in the reverse order, for the lo end.
         let raw = if outward == 1 {
@@ -368,38 +394,41 @@ mod avx {
         let (_, further_outside) = inside_outside(table, nodes[3]);
         // The end moved back (its node left, the one behind it is in), stayed, or moved on
         // (the node beyond came in, the one after it is out): bit l of each for lane l.
-        let back = at_end_outside & back_inside;
-        let stayed = at_end_inside & beyond_outside;
-        let on = at_end_inside & beyond_inside & further_outside;
-        let mut moved = [None; 4];
-        for (l, moved) in moved.iter_mut().enumerate() {
-            let bit = 1 << l;
-            *moved = if back & bit != 0 {
-                Some(-1)
-            } else if stayed & bit != 0 {
-                Some(0)
-            } else if on & bit != 0 {
-                Some(1)
-            } else {
-                None
-            };
-        }
+        // The three exclude each other: a node is not both in and out.
+        let moved = Moved {
+            back: at_end_outside & back_inside,
+            stayed: at_end_inside & beyond_outside,
+            on: at_end_inside & beyond_inside & further_outside,
+        };
         (raw, nodes, moved)
     }
 
-    /// The blend masks of an end's offsets (-1, 0 or 1): the lanes that moved back, and those
-    /// that moved on.
-    #[inline(always)]
-    unsafe fn moved_masks(moved: &[isize; 4]) -> (V, V) {
-        (
-            mask([
-                moved[0] == -1,
-                moved[1] == -1,
-                moved[2] == -1,
-                moved[3] == -1,
-            ]),
-            mask([moved[0] == 1, moved[1] == 1, moved[2] == 1, moved[3] == 1]),
-        )
+    /// Where a chain's end moved, lanes as bits (see [`end_moved`]).
+    #[derive(Clone, Copy)]
+    struct Moved {
+        back: Bits,
+        stayed: Bits,
+        on: Bits,
+    }
+
+    impl Moved {
+        /// The lanes whose end moved by at most a node.
+        #[inline(always)]
+        fn settled(self) -> Bits {
+            self.back | self.stayed | self.on
+        }
+
+        /// Lane `l`'s offset of the end along its outward direction: -1, 0 or 1.
+        #[inline(always)]
+        fn offset(self, l: usize) -> isize {
+            ((self.on >> l) & 1) as isize - ((self.back >> l) & 1) as isize
+        }
+
+        /// The blend masks of the lanes of `kept` that moved back, and of those that moved on.
+        #[inline(always)]
+        unsafe fn masks(self, kept: Bits) -> (V, V) {
+            (mask(self.back & kept), mask(self.on & kept))
+        }
     }
 
     /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and the masks
@@ -451,14 +480,15 @@ mod avx {
         p_in: V2,
         p_out: V2,
         guess: [usize; 4],
-    ) -> (V, [usize; 4], [bool; 4], [V2; 2]) {
+    ) -> (V, [usize; 4], Bits, [V2; 2]) {
         let direction = sub(p_out, p_in);
         let apothem = _mm256_set1_pd(table.apothem);
-        let zero = _mm256_setzero_pd();
+        let (zero, one) = (_mm256_setzero_pd(), _mm256_set1_pd(1.0));
         let mut edge = guess;
-        let mut t = [0.0; 4];
-        let mut found = [false; 4];
-        let mut open = [true; 4];
+        let mut t = zero;
+        let mut found = 0;
+        // The lanes still looking.
+        let mut open = ALL;
         let mut ends = [V2 { x: zero, y: zero }; 2];
         for _try in 0..2 {
             let [start, end, normal] = edges(table, edge);
@@ -472,30 +502,30 @@ mod avx {
             let rising = bits(_mm256_cmp_pd::<_CMP_GT_OQ>(rate, zero));
             let after_start = bits(_mm256_cmp_pd::<_CMP_GE_OQ>(perp_dot(start, q), zero));
             let before_end = bits(_mm256_cmp_pd::<_CMP_LE_OQ>(perp_dot(end, q), zero));
-            let t_try = lanes(t_try);
-            for l in 0..4 {
-                if !open[l] {
-                    continue;
-                }
-                if !rising[l] {
-                    open[l] = false;
-                } else if after_start[l] && before_end[l] {
-                    open[l] = false;
-                    found[l] = t_try[l] > 0.0 && t_try[l] <= 1.0;
-                    t[l] = t_try[l];
-                } else {
-                    edge[l] = if after_start[l] {
-                        table.next(edge[l])
+            // Within the edge of a (false for a NaN, as the one-pair path's test).
+            let within = bits(_mm256_and_pd(
+                _mm256_cmp_pd::<_CMP_GT_OQ>(t_try, zero),
+                _mm256_cmp_pd::<_CMP_LE_OQ>(t_try, one),
+            ));
+            // A lane whose edge of a does not rise through b's edge line stops, unfound.
+            let hit = open & rising & after_start & before_end;
+            found |= hit & within;
+            t = _mm256_blendv_pd(t, t_try, mask(hit));
+            open &= rising & !hit;
+            for (l, edge) in edge.iter_mut().enumerate() {
+                if has(open, l) {
+                    *edge = if has(after_start, l) {
+                        table.next(*edge)
                     } else {
-                        table.previous(edge[l])
+                        table.previous(*edge)
                     };
                 }
             }
-            if !open.contains(&true) {
+            if open == 0 {
                 break;
             }
         }
-        (vector(t), edge, found, ends)
+        (t, edge, found, ends)
     }
 
     /// The crossing on a's edge from its node `v_in` to `v_out` (reference coordinates) at
@@ -544,23 +574,22 @@ mod avx {
         // The deepest node is one of the two or three around the chain's middle (see the
         // one-pair path); the last is repeated where there are fewer.
         let mut start = [0; 4];
-        let mut count = [0; 4];
+        // The lanes with more than one node, and with more than two.
+        let mut more = [0; 3];
         for l in 0..4 {
             let sum = lo[l] + hi[l];
             let middle = sum >> 1;
             start[l] = (middle - 1 + (sum & 1)).max(lo[l]);
-            count[l] = (middle + 1).min(hi[l]) - start[l] + 1;
+            let count = (middle + 1).min(hi[l]) - start[l] + 1;
+            more[1] |= ((count > 1) as Bits) << l;
+            more[2] |= ((count > 2) as Bits) << l;
         }
         let support = transpose_mul_vec(map, outward);
         let around = ring4(table, start);
         let mut reach = dot(around[0], support);
-        for (k, node) in around.iter().enumerate().take(3).skip(1) {
-            let r = dot(*node, support);
-            let k = k as isize;
-            let further = _mm256_and_pd(
-                _mm256_cmp_pd::<_CMP_GT_OQ>(r, reach),
-                mask([count[0] > k, count[1] > k, count[2] > k, count[3] > k]),
-            );
+        for k in 1..3 {
+            let r = dot(around[k], support);
+            let further = _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(r, reach), mask(more[k]));
             reach = _mm256_blendv_pd(reach, r, further);
         }
         let mut depth = lanes(_mm256_add_pd(dot(sub(center, origin), outward), reach));
@@ -607,7 +636,7 @@ mod avx {
         // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
         // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
         // j's chain runs within [0, 2N) with its middle under 3N / 2.
-        let mut on_path = [false; 4];
+        let mut on_path: Bits = 0;
         // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
         // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on
         // (lo - 1, lo).
@@ -628,7 +657,7 @@ mod avx {
                 && (second.lo as u32) < turn
                 && (second.hi as u32) < turn;
             if hints_in_turn && !pairs[l].j_circle && chain_hi - chain_lo < half {
-                on_path[l] = true;
+                on_path |= 1 << l;
                 lo[l] = chain_lo;
                 hi[l] = chain_hi;
                 guess_lo[l] = second.hi as usize;
@@ -651,24 +680,19 @@ mod avx {
         // The lo end runs outward to lower indices, the hi end to higher ones.
         let (raw_lo, nodes_lo, moved_lo) = end_moved(table, m, t, lo, -1);
         let (raw_hi, nodes_hi, moved_hi) = end_moved(table, m, t, hi, 1);
-        let mut offset_lo = [0; 4];
-        let mut offset_hi = [0; 4];
+        // The lanes whose ends both moved by at most a node, into a chain still short: they
+        // take the new ends; the others keep theirs and leave the path.
+        let settled = moved_lo.settled() & moved_hi.settled() & near;
+        let mut moved = 0;
         for l in 0..4 {
-            match (moved_lo[l], moved_hi[l]) {
-                (Some(d_lo), Some(d_hi)) if near[l] => {
-                    let (new_lo, new_hi) = (lo[l] - d_lo, hi[l] + d_hi);
-                    if new_hi < new_lo || new_hi - new_lo >= half {
-                        on_path[l] = false;
-                    } else {
-                        (offset_lo[l], offset_hi[l]) = (d_lo, d_hi);
-                    }
-                }
-                _ => on_path[l] = false,
+            let (new_lo, new_hi) = (lo[l] - moved_lo.offset(l), hi[l] + moved_hi.offset(l));
+            if has(settled, l) && new_hi >= new_lo && new_hi - new_lo < half {
+                moved |= 1 << l;
+                (lo[l], hi[l]) = (new_lo, new_hi);
             }
-            lo[l] -= offset_lo[l];
-            hi[l] += offset_hi[l];
         }
-        let (masks_lo, masks_hi) = (moved_masks(&offset_lo), moved_masks(&offset_hi));
+        on_path &= moved;
+        let (masks_lo, masks_hi) = (moved_lo.masks(moved), moved_hi.masks(moved));
         let (lo_in, lo_out) = end_and_beyond(&nodes_lo, masks_lo);
         let (hi_in, hi_out) = end_and_beyond(&nodes_hi, masks_hi);
         // The same nodes in i's reference coordinates.
@@ -683,9 +707,9 @@ mod avx {
         let mut j_lo = [0; 4];
         let mut j_hi = [0; 4];
         let mut j_chain = [false; 4];
+        on_path &= found_lo & found_hi;
         for l in 0..4 {
-            on_path[l] &= found_lo[l] && found_hi[l];
-            if on_path[l] && edge_lo[l] != edge_hi[l] {
+            if has(on_path, l) && edge_lo[l] != edge_hi[l] {
                 let first = table.next(edge_hi[l]) as isize;
                 let last = edge_lo[l] as isize;
                 j_chain[l] = true;
@@ -741,7 +765,7 @@ mod avx {
         for l in 0..4 {
             out[l] = None;
             let shortest = f64::EPSILON * reach_i[l].min(reach_j[l]);
-            if !on_path[l] || length[l] <= shortest {
+            if !has(on_path, l) || length[l] <= shortest {
                 continue;
             }
             let wrap = |k: isize| table.wrap(k) as i32;
