@@ -14,6 +14,7 @@
 
 use super::contour::{ContourTable, GrainShape};
 use super::intersection::{ContactGeometry, PairHint};
+use glam::DVec2;
 
 #[cfg(doc)]
 use super::intersection::grain_grain_hinted;
@@ -71,6 +72,43 @@ impl LanePair {
 /// leaves the common path (then [`grain_grain_hinted`] decides, from the old hint).
 pub type LaneContact = Option<(ContactGeometry, PairHint)>;
 
+/// What a block found, lane by lane ([`lane`](Self::lane)): the contacts' quantities as the
+/// kernel's vectors left them, one array a quantity, which the lanes on the path fill.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(32))]
+pub struct BlockContacts {
+    point: [[f64; BLOCK]; 2],
+    normal: [[f64; BLOCK]; 2],
+    length: [f64; BLOCK],
+    cap_area_i: [f64; BLOCK],
+    cap_area_j: [f64; BLOCK],
+    normal_gap: [f64; BLOCK],
+    hint: [PairHint; BLOCK],
+    /// The lanes on the common path: bit `l` for lane `l`.
+    on_path: u32,
+}
+
+impl BlockContacts {
+    /// Lane `l`'s contact and next hint, `None` off the path.
+    #[inline(always)]
+    pub fn lane(&self, l: usize) -> LaneContact {
+        if self.on_path & (1 << l) == 0 {
+            return None;
+        }
+        Some((
+            ContactGeometry {
+                point: DVec2::new(self.point[0][l], self.point[1][l]),
+                normal: DVec2::new(self.normal[0][l], self.normal[1][l]),
+                length: self.length[l],
+                cap_area_i: self.cap_area_i[l],
+                cap_area_j: self.cap_area_j[l],
+                normal_gap: self.normal_gap[l],
+            },
+            self.hint[l],
+        ))
+    }
+}
+
 /// Whether this processor runs [`grain_grain_block`]'s lanes (else every lane is `None`).
 pub fn block_available() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -88,7 +126,7 @@ pub fn block_available() -> bool {
 pub fn grain_grain_block(
     table: &ContourTable,
     pairs: &[LanePair; BLOCK],
-    contacts: &mut [LaneContact; BLOCK],
+    contacts: &mut BlockContacts,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
@@ -97,7 +135,7 @@ pub fn grain_grain_block(
         return;
     }
     let _ = (table, pairs);
-    *contacts = [None; BLOCK];
+    contacts.on_path = 0;
 }
 
 // The helpers are `unsafe` for they run AVX instructions: every one is inlined into
@@ -105,10 +143,9 @@ pub fn grain_grain_block(
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_op_in_unsafe_fn)]
 mod avx {
-    use super::{BLOCK, LaneContact, LanePair};
+    use super::{BLOCK, BlockContacts, LanePair};
     use crate::geometry::contour::{ContourTable, Edge};
-    use crate::geometry::intersection::{ChainHint, ContactGeometry, PairHint};
-    use glam::DVec2;
+    use crate::geometry::intersection::{ChainHint, PairHint};
     use std::arch::x86_64::*;
 
     type V = __m256d;
@@ -184,6 +221,11 @@ mod avx {
             x: _mm256_blendv_pd(a.x, b.x, m),
             y: _mm256_blendv_pd(a.y, b.y, m),
         }
+    }
+
+    #[inline(always)]
+    unsafe fn store(to: &mut [f64; 4], v: V) {
+        _mm256_storeu_pd(to.as_mut_ptr(), v);
     }
 
     /// The lanes where a comparison's result `v` holds.
@@ -626,7 +668,7 @@ mod avx {
     pub(super) unsafe fn grain_grain_block(
         table: &ContourTable,
         pairs: &[LanePair; BLOCK],
-        out: &mut [LaneContact; BLOCK],
+        out: &mut BlockContacts,
     ) {
         let n = table.nodes as isize;
         let half = n / 2;
@@ -706,13 +748,13 @@ mod avx {
         // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
         let mut j_lo = [0; 4];
         let mut j_hi = [0; 4];
-        let mut j_chain = [false; 4];
+        let mut j_chain: Bits = 0;
         on_path &= found_lo & found_hi;
         for l in 0..4 {
             if has(on_path, l) && edge_lo[l] != edge_hi[l] {
                 let first = table.next(edge_hi[l]) as isize;
                 let last = edge_lo[l] as isize;
-                j_chain[l] = true;
+                j_chain |= 1 << l;
                 j_lo[l] = first;
                 j_hi[l] = if last < first { last + n } else { last };
             }
@@ -754,48 +796,48 @@ mod avx {
             point,
             minus_normal,
         );
-        let (length, cap_area_i, cap_area_j) =
-            (lanes(length), lanes(cap_area_i), lanes(cap_area_j));
-        let (reach_i, reach_j) = (lanes(reach_i), lanes(reach_j));
-        let (point, normal) = (
-            [lanes(point.x), lanes(point.y)],
-            [lanes(normal.x), lanes(normal.y)],
+        // A chord shorter than rounding is no contact (a NaN length stays, as in the one-pair
+        // path's test).
+        let shortest = _mm256_mul_pd(
+            _mm256_set1_pd(f64::EPSILON),
+            _mm256_min_pd(reach_i, reach_j),
         );
-
+        on_path &= bits(_mm256_cmp_pd::<_CMP_NLE_UQ>(length, shortest));
+        out.on_path = on_path as u32;
+        store(&mut out.point[0], point.x);
+        store(&mut out.point[1], point.y);
+        store(&mut out.normal[0], normal.x);
+        store(&mut out.normal[1], normal.y);
+        store(&mut out.length, length);
+        store(&mut out.cap_area_i, cap_area_i);
+        // Without a chain of j its cap and depth are zero.
+        let j_chain_mask = mask(j_chain);
+        store(
+            &mut out.cap_area_j,
+            _mm256_and_pd(cap_area_j, j_chain_mask),
+        );
         for l in 0..4 {
-            out[l] = None;
-            let shortest = f64::EPSILON * reach_i[l].min(reach_j[l]);
-            if !has(on_path, l) || length[l] <= shortest {
+            if !has(on_path, l) {
                 continue;
             }
             let wrap = |k: isize| table.wrap(k) as i32;
-            // Without a chain of j its cap and depth are zero.
-            let (cap_area_j, depth_j, second) = if j_chain[l] {
+            let (depth_j, second) = if has(j_chain, l) {
                 let second = ChainHint {
                     lo: wrap(j_lo[l]),
                     hi: wrap(j_hi[l]),
                 };
-                (cap_area_j[l], depth_j[l], second)
+                (depth_j[l], second)
             } else {
-                (0.0, 0.0, ChainHint::NONE)
+                (0.0, ChainHint::NONE)
             };
-            out[l] = Some((
-                ContactGeometry {
-                    point: DVec2::new(point[0][l], point[1][l]),
-                    normal: DVec2::new(normal[0][l], normal[1][l]),
-                    length: length[l],
-                    cap_area_i: cap_area_i[l],
-                    cap_area_j,
-                    normal_gap: -0.5 * (depth_i[l] + depth_j),
+            out.normal_gap[l] = -0.5 * (depth_i[l] + depth_j);
+            out.hint[l] = PairHint {
+                first: ChainHint {
+                    lo: wrap(lo[l]),
+                    hi: wrap(hi[l]),
                 },
-                PairHint {
-                    first: ChainHint {
-                        lo: wrap(lo[l]),
-                        hi: wrap(hi[l]),
-                    },
-                    second,
-                },
-            ));
+                second,
+            };
         }
     }
 }
@@ -872,13 +914,13 @@ mod tests {
                 let mut block: [_; BLOCK] = block.try_into().unwrap();
                 block.rotate_left(rotation % BLOCK);
                 let lanes = block.map(|(lane, _, _)| lane);
-                let mut contacts = [None; BLOCK];
+                let mut contacts = BlockContacts::default();
                 grain_grain_block(&table, &lanes, &mut contacts);
                 for (l, (pair, i, j)) in block.iter().enumerate() {
                     let mut hint = pair.hint;
                     let one = grain_grain_hinted(&table, i, j, &mut hint);
                     total += 1;
-                    if let Some((contact, next_hint)) = contacts[l] {
+                    if let Some((contact, next_hint)) = contacts.lane(l) {
                         assert_eq!(one, Overlap::Contact(contact), "lane {l}");
                         assert_eq!(hint, next_hint, "lane {l}");
                         on_path += 1;

@@ -29,7 +29,7 @@ use crate::geometry::circle::{
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
-    BLOCK, LaneContact, LanePair, block_available, grain_grain_block,
+    BLOCK, BlockContacts, LaneContact, LanePair, block_available, grain_grain_block,
 };
 use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -488,7 +488,7 @@ struct PolygonsAhead<'a> {
     pairs: [usize; BLOCK],
     /// The block's shapes and hints, kept from block to block (only their filling changes).
     block: [LanePair; BLOCK],
-    results: [LaneContact; BLOCK],
+    results: BlockContacts,
     filled: usize,
     taken: usize,
 }
@@ -506,7 +506,7 @@ impl<'a> PolygonsAhead<'a> {
             },
             pairs: [0; BLOCK],
             block: [LanePair::default(); BLOCK],
-            results: [None; BLOCK],
+            results: BlockContacts::default(),
             filled: 0,
             taken: 0,
         }
@@ -525,7 +525,7 @@ impl<'a> PolygonsAhead<'a> {
         let table = self.table?;
         if self.taken < self.filled && self.pairs[self.taken] == k {
             self.taken += 1;
-            return self.results[self.taken - 1];
+            return self.results.lane(self.taken - 1);
         }
         if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
             return None;
@@ -551,7 +551,7 @@ impl<'a> PolygonsAhead<'a> {
         grain_grain_block(table, block, &mut self.results);
         self.filled = filled;
         self.taken = 1;
-        self.results[0]
+        self.results.lane(0)
     }
 }
 
