@@ -48,7 +48,9 @@ pub struct ContactGeometry {
 /// Where the chain of one contour inside another was found in the previous step: the node
 /// indices (in [0, N)) of its ends, or `NONE`. A hint only decides where the exact search
 /// starts: a stale or wrong hint costs a few more tests, never a different result.
+/// `repr(C)`, as [`PairHint`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(C)]
 pub struct ChainHint {
     pub lo: i32,
     pub hi: i32,
@@ -64,8 +66,11 @@ impl Default for ChainHint {
     }
 }
 
-/// Hints for both sides of a grain–grain contact.
+/// Hints for both sides of a grain–grain contact. `repr(C)`: four `i32`s in the order
+/// first.lo, first.hi, second.lo, second.hi, which the contact lanes load and store as one
+/// vector a pair.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(C)]
 pub struct PairHint {
     pub first: ChainHint,
     pub second: ChainHint,

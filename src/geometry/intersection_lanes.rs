@@ -23,7 +23,8 @@ use super::intersection::grain_grain_hinted;
 pub const BLOCK: usize = 4;
 
 /// One grain of a pair as a block reads it: its centre, its map `A R` by columns and its
-/// bounding radius (see [`GrainShape`]), and a zero that completes the second vector.
+/// bounding radius (see [`GrainShape`]), and whether it is a circle (1 or 0), which complete
+/// the second vector.
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C, align(32))]
 pub struct LaneShape([f64; 8]);
@@ -40,19 +41,18 @@ impl LaneShape {
             m.y_axis.x,
             m.y_axis.y,
             shape.bounding_radius,
-            0.0,
+            if shape.circle { 1.0 } else { 0.0 },
         ])
     }
 }
 
-/// One pair of a block: the two shapes (j's centre at the image that meets i), whether j is a
-/// circle (whose inverse map the one-pair path takes as `1/r` times the identity: such pairs
-/// leave the path), and the pair's hint from last step.
+/// One pair of a block: the two shapes (j's centre at the image that meets i) and the pair's
+/// hint from last step. A pair whose j is a circle (whose inverse map the one-pair path takes
+/// as `1/r` times the identity) leaves the path.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct LanePair {
     pub i: LaneShape,
     pub j: LaneShape,
-    pub j_circle: bool,
     pub hint: PairHint,
 }
 
@@ -62,7 +62,6 @@ impl LanePair {
         Self {
             i: LaneShape::of(i),
             j: LaneShape::of(j),
-            j_circle: j.circle,
             hint,
         }
     }
@@ -171,11 +170,6 @@ mod avx {
         unsafe { std::mem::transmute::<V, [f64; 4]>(v) }
     }
 
-    #[inline(always)]
-    unsafe fn vector(a: [f64; 4]) -> V {
-        _mm256_set_pd(a[3], a[2], a[1], a[0])
-    }
-
     /// Lanes as bits: bit `l` for lane `l` (what `_mm256_movemask_pd` gives).
     type Bits = i32;
 
@@ -212,6 +206,111 @@ mod avx {
     #[inline(always)]
     fn has(b: Bits, l: usize) -> bool {
         b & (1 << l) != 0
+    }
+
+    /// Four lanes of node indices, as `i32`s (N is far below 2^31): SSE4.1, which AVX
+    /// implies.
+    type I = __m128i;
+
+    #[inline(always)]
+    unsafe fn splat_i(k: i32) -> I {
+        _mm_set1_epi32(k)
+    }
+
+    #[inline(always)]
+    unsafe fn add_i(a: I, b: I) -> I {
+        _mm_add_epi32(a, b)
+    }
+
+    #[inline(always)]
+    unsafe fn sub_i(a: I, b: I) -> I {
+        _mm_sub_epi32(a, b)
+    }
+
+    /// The lanes where `a > b`.
+    #[inline(always)]
+    unsafe fn greater_i(a: I, b: I) -> Bits {
+        _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(a, b)))
+    }
+
+    /// All bits set in the lanes of `b`, as indices' mask.
+    #[inline(always)]
+    unsafe fn mask_i(b: Bits) -> I {
+        let wide = mask(b);
+        // Each 64-bit lane's low half.
+        _mm_castps_si128(_mm_shuffle_ps::<0b10_00_10_00>(
+            _mm256_castps256_ps128(_mm256_castpd_ps(wide)),
+            _mm256_extractf128_ps::<1>(_mm256_castpd_ps(wide)),
+        ))
+    }
+
+    /// `b` in the lanes of `m`, else `a`.
+    #[inline(always)]
+    unsafe fn select_i(a: I, b: I, m: Bits) -> I {
+        _mm_blendv_epi8(a, b, mask_i(m))
+    }
+
+    /// 1 in the lanes of `b`, else 0.
+    #[inline(always)]
+    unsafe fn ones_i(b: Bits) -> I {
+        _mm_srli_epi32::<31>(mask_i(b))
+    }
+
+    /// The lanes as `isize`s.
+    #[inline(always)]
+    unsafe fn index_lanes(v: I) -> [isize; 4] {
+        // SAFETY: both are 16 bytes of four i32s, lane 0 first.
+        let k = std::mem::transmute::<I, [i32; 4]>(v);
+        [k[0] as isize, k[1] as isize, k[2] as isize, k[3] as isize]
+    }
+
+    #[inline(always)]
+    unsafe fn index_vector(k: [usize; 4]) -> I {
+        _mm_set_epi32(k[3] as i32, k[2] as i32, k[1] as i32, k[0] as i32)
+    }
+
+    /// `ContourTable::wrap` of indices within one turn of [0, N), [-N, 2N).
+    #[inline(always)]
+    unsafe fn wrap_i(k: I, n: i32) -> I {
+        let turn = splat_i(n);
+        let below = _mm_cmpgt_epi32(_mm_setzero_si128(), k);
+        let beyond = _mm_cmpgt_epi32(k, splat_i(n - 1));
+        add_i(
+            k,
+            sub_i(_mm_and_si128(below, turn), _mm_and_si128(beyond, turn)),
+        )
+    }
+
+    /// The transpose of four lanes of four `i32`s: lane `l` of vector `c` is `rows[l]`'s `c`th.
+    #[inline(always)]
+    unsafe fn transpose_i(rows: [I; 4]) -> [I; 4] {
+        let (ab_low, cd_low) = (
+            _mm_unpacklo_epi32(rows[0], rows[1]),
+            _mm_unpacklo_epi32(rows[2], rows[3]),
+        );
+        let (ab_high, cd_high) = (
+            _mm_unpackhi_epi32(rows[0], rows[1]),
+            _mm_unpackhi_epi32(rows[2], rows[3]),
+        );
+        [
+            _mm_unpacklo_epi64(ab_low, cd_low),
+            _mm_unpackhi_epi64(ab_low, cd_low),
+            _mm_unpacklo_epi64(ab_high, cd_high),
+            _mm_unpackhi_epi64(ab_high, cd_high),
+        ]
+    }
+
+    /// The pairs' hints as lanes: first.lo, first.hi, second.lo, second.hi.
+    #[inline(always)]
+    unsafe fn hints(pairs: &[LanePair; BLOCK]) -> [I; 4] {
+        // SAFETY: a `PairHint` is four i32s (`repr(C)`).
+        let row = |l: usize| (&pairs[l].hint as *const PairHint).cast::<I>();
+        transpose_i([
+            _mm_loadu_si128(row(0)),
+            _mm_loadu_si128(row(1)),
+            _mm_loadu_si128(row(2)),
+            _mm_loadu_si128(row(3)),
+        ])
     }
 
     /// `b` in the lanes of `m`, else `a`.
@@ -337,15 +436,16 @@ mod avx {
     /// Every `start[l]` lies in [-N, 2N - 3), so that the four nodes lie within the ring
     /// (see `grain_grain_block` for why the kernel's do), and the processor has AVX.
     #[inline(always)]
-    unsafe fn ring4(table: &ContourTable, start: [isize; 4]) -> [V2; 4] {
+    unsafe fn ring4(table: &ContourTable, start: I) -> [V2; 4] {
         let ring = table.vertex_ring().as_ptr();
         let nodes = table.nodes as isize;
-        debug_assert!(start.iter().all(|&k| -nodes <= k && k + 3 < 2 * nodes));
+        let at = index_lanes(add_i(start, splat_i(nodes as i32)));
+        debug_assert!(at.iter().all(|&k| 0 <= k && k + 3 < 3 * nodes));
         let (a, b, c, d) = (
-            ring.offset(start[0] + nodes).cast::<f64>(),
-            ring.offset(start[1] + nodes).cast::<f64>(),
-            ring.offset(start[2] + nodes).cast::<f64>(),
-            ring.offset(start[3] + nodes).cast::<f64>(),
+            ring.offset(at[0]).cast::<f64>(),
+            ring.offset(at[1]).cast::<f64>(),
+            ring.offset(at[2]).cast::<f64>(),
+            ring.offset(at[3]).cast::<f64>(),
         );
         let [n0, n1] = load_pairs([a, b, c, d], 0);
         let [n2, n3] = load_pairs([a, b, c, d], 4);
@@ -382,11 +482,6 @@ mod avx {
         ]
     }
 
-    #[inline(always)]
-    fn offset(k: [isize; 4], d: isize) -> [isize; 4] {
-        [k[0] + d, k[1] + d, k[2] + d, k[3] + d]
-    }
-
     /// The inside tests of `ContourTable::contains` that need no sector, as bit masks of the
     /// lanes: inside the inscribed circle, and outside the circumscribed one (a point in the
     /// ring between them, or a NaN, is in neither).
@@ -413,15 +508,15 @@ mod avx {
         table: &ContourTable,
         m: M2,
         t: V2,
-        end: [isize; 4],
+        end: I,
         outward: isize,
     ) -> ([V2; 4], [V2; 4], Moved) {
         // The four nodes lie together in memory: from end - 1 up for the hi end (outward
         // 1), from end - 2 up, in the reverse order, for the lo end.
         let raw = if outward == 1 {
-            ring4(table, offset(end, -1))
+            ring4(table, add_i(end, splat_i(-1)))
         } else {
-            let [a, b, c, d] = ring4(table, offset(end, -2));
+            let [a, b, c, d] = ring4(table, add_i(end, splat_i(-2)));
             [d, c, b, a]
         };
         let nodes = [
@@ -460,10 +555,10 @@ mod avx {
             self.back | self.stayed | self.on
         }
 
-        /// Lane `l`'s offset of the end along its outward direction: -1, 0 or 1.
+        /// The offsets of the ends along their outward direction: -1, 0 or 1.
         #[inline(always)]
-        fn offset(self, l: usize) -> isize {
-            ((self.on >> l) & 1) as isize - ((self.back >> l) & 1) as isize
+        unsafe fn offsets(self) -> I {
+            sub_i(ones_i(self.on), ones_i(self.back))
         }
 
         /// The blend masks of the lanes of `kept` that moved back, and of those that moved on.
@@ -586,7 +681,7 @@ mod avx {
         table: &ContourTable,
         center: V2,
         map: M2,
-        (lo, hi): ([isize; 4], [isize; 4]),
+        (lo, hi): (I, I),
         (vertex_lo, vertex_hi): (V2, V2),
         from: V2,
         to: V2,
@@ -596,12 +691,7 @@ mod avx {
         let first = mul_vec(map, vertex_lo);
         let last = mul_vec(map, vertex_hi);
         let (from, to) = (sub(from, center), sub(to, center));
-        let spanned = vector([
-            (hi[0] - lo[0]) as f64,
-            (hi[1] - lo[1]) as f64,
-            (hi[2] - lo[2]) as f64,
-            (hi[3] - lo[3]) as f64,
-        ]);
+        let spanned = _mm256_cvtepi32_pd(sub_i(hi, lo));
         let fan = _mm256_mul_pd(
             _mm256_mul_pd(spanned, determinant(map)),
             _mm256_set1_pd(table.sin_dbeta),
@@ -615,17 +705,17 @@ mod avx {
         );
         // The deepest node is one of the two or three around the chain's middle (see the
         // one-pair path); the last is repeated where there are fewer.
-        let mut start = [0; 4];
+        let one = splat_i(1);
+        let sum = add_i(lo, hi);
+        // `>> 1` rounds down, as the one-pair path's on `isize`.
+        let middle = _mm_srai_epi32::<1>(sum);
+        let start = _mm_max_epi32(
+            add_i(sub_i(middle, one), _mm_and_si128(sum, one)),
+            lo,
+        );
+        let count = add_i(sub_i(_mm_min_epi32(add_i(middle, one), hi), start), one);
         // The lanes with more than one node, and with more than two.
-        let mut more = [0; 3];
-        for l in 0..4 {
-            let sum = lo[l] + hi[l];
-            let middle = sum >> 1;
-            start[l] = (middle - 1 + (sum & 1)).max(lo[l]);
-            let count = (middle + 1).min(hi[l]) - start[l] + 1;
-            more[1] |= ((count > 1) as Bits) << l;
-            more[2] |= ((count > 2) as Bits) << l;
-        }
+        let more = [0, greater_i(count, one), greater_i(count, splat_i(2))];
         let support = transpose_mul_vec(map, outward);
         let around = ring4(table, start);
         let mut reach = dot(around[0], support);
@@ -641,9 +731,10 @@ mod avx {
         (_mm256_mul_pd(_mm256_set1_pd(0.5), twice_area), depth)
     }
 
-    /// A grain's centre, map and bounding radius, side i or j of each pair.
+    /// A grain's centre, map and bounding radius, side i or j of each pair, and the lanes
+    /// where it is a circle.
     #[inline(always)]
-    unsafe fn shapes(pairs: &[LanePair; BLOCK], second: bool) -> (V2, M2, V) {
+    unsafe fn shapes(pairs: &[LanePair; BLOCK], second: bool) -> (V2, M2, V, Bits) {
         let side = |l: usize| {
             let shape = if second { &pairs[l].j } else { &pairs[l].i };
             shape.0.as_ptr()
@@ -661,6 +752,7 @@ mod avx {
                 y1: y_axis.y,
             },
             radius.x,
+            bits(_mm256_cmp_pd::<_CMP_NEQ_UQ>(radius.y, _mm256_setzero_pd())),
         )
     }
 
@@ -678,37 +770,46 @@ mod avx {
         // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
         // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
         // j's chain runs within [0, 2N) with its middle under 3N / 2.
-        let mut on_path: Bits = 0;
+        let turn = n as i32;
         // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
         // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on
         // (lo - 1, lo).
-        let mut lo = [0; 4];
-        let mut hi = [0; 4];
-        let mut guess_lo = [0; 4];
-        let mut guess_hi = [0; 4];
-        for l in 0..4 {
-            let PairHint { first, second } = pairs[l].hint;
-            let (chain_lo, mut chain_hi) = (first.lo as isize, first.hi as isize);
-            if chain_hi < chain_lo {
-                chain_hi += n;
-            }
-            // One unsigned comparison each: a negative hint (NONE) wraps above N.
-            let turn = n as u32;
-            let hints_in_turn = (first.lo as u32) < turn
-                && (first.hi as u32) < turn
-                && (second.lo as u32) < turn
-                && (second.hi as u32) < turn;
-            if hints_in_turn && !pairs[l].j_circle && chain_hi - chain_lo < half {
-                on_path |= 1 << l;
-                lo[l] = chain_lo;
-                hi[l] = chain_hi;
-                guess_lo[l] = second.hi as usize;
-                guess_hi[l] = table.previous(second.lo as usize);
-            }
-        }
+        let [first_lo, first_hi, second_lo, second_hi] = hints(pairs);
+        let chain_hi = add_i(
+            first_hi,
+            _mm_and_si128(_mm_cmpgt_epi32(first_lo, first_hi), splat_i(turn)),
+        );
+        // All four hints in [0, N), compared unsigned: a negative hint (NONE) wraps above N.
+        let largest = _mm_max_epu32(
+            _mm_max_epu32(first_lo, first_hi),
+            _mm_max_epu32(second_lo, second_hi),
+        );
+        let hints_in_turn = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(
+            _mm_min_epu32(largest, splat_i(turn - 1)),
+            largest,
+        )));
+        let short = greater_i(splat_i(half as i32), sub_i(chain_hi, first_lo));
 
-        let (center_i, map_i, reach_i) = shapes(pairs, false);
-        let (center_j, map_j, reach_j) = shapes(pairs, true);
+        let (center_i, map_i, reach_i, _) = shapes(pairs, false);
+        let (center_j, map_j, reach_j, j_circle) = shapes(pairs, true);
+        // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
+        // ring is read without bounds checks (`ring4`), so every node index formed here lies
+        // in [-N, 2N - 3) (N >= 8): a lane starts with hints in [0, N), checked above (a lane
+        // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
+        // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
+        // j's chain runs within [0, 2N) with its middle under 3N / 2.
+        let mut on_path: Bits = hints_in_turn & short & !j_circle;
+        let zero_i = _mm_setzero_si128();
+        let mut lo = select_i(zero_i, first_lo, on_path);
+        let mut hi = select_i(zero_i, chain_hi, on_path);
+        let guess_lo = index_lanes(select_i(zero_i, second_hi, on_path)).map(|k| k as usize);
+        let before = add_i(second_lo, splat_i(-1));
+        let before = add_i(
+            before,
+            _mm_and_si128(_mm_cmpgt_epi32(zero_i, before), splat_i(turn)),
+        );
+        let guess_hi = index_lanes(select_i(zero_i, before, on_path)).map(|k| k as usize);
+
         let branch = sub(center_i, center_j);
         let reach = _mm256_add_pd(reach_i, reach_j);
         let near = bits(_mm256_cmp_pd::<_CMP_LT_OQ>(
@@ -724,15 +825,17 @@ mod avx {
         let (raw_hi, nodes_hi, moved_hi) = end_moved(table, m, t, hi, 1);
         // The lanes whose ends both moved by at most a node, into a chain still short: they
         // take the new ends; the others keep theirs and leave the path.
-        let settled = moved_lo.settled() & moved_hi.settled() & near;
-        let mut moved = 0;
-        for l in 0..4 {
-            let (new_lo, new_hi) = (lo[l] - moved_lo.offset(l), hi[l] + moved_hi.offset(l));
-            if has(settled, l) && new_hi >= new_lo && new_hi - new_lo < half {
-                moved |= 1 << l;
-                (lo[l], hi[l]) = (new_lo, new_hi);
-            }
-        }
+        let (new_lo, new_hi) = (
+            sub_i(lo, moved_lo.offsets()),
+            add_i(hi, moved_hi.offsets()),
+        );
+        let moved = moved_lo.settled()
+            & moved_hi.settled()
+            & near
+            & !greater_i(new_lo, new_hi)
+            & greater_i(splat_i(half as i32), sub_i(new_hi, new_lo));
+        lo = select_i(lo, new_lo, moved);
+        hi = select_i(hi, new_hi, moved);
         on_path &= moved;
         let (masks_lo, masks_hi) = (moved_lo.masks(moved), moved_hi.masks(moved));
         let (lo_in, lo_out) = end_and_beyond(&nodes_lo, masks_lo);
@@ -746,19 +849,20 @@ mod avx {
         let p_lo = crossing(center_i, map_i, vertex_lo, vertex_lo_out, t_lo);
         let p_hi = crossing(center_i, map_i, vertex_hi, vertex_hi_out, t_hi);
         // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
-        let mut j_lo = [0; 4];
-        let mut j_hi = [0; 4];
-        let mut j_chain: Bits = 0;
         on_path &= found_lo & found_hi;
-        for l in 0..4 {
-            if has(on_path, l) && edge_lo[l] != edge_hi[l] {
-                let first = table.next(edge_hi[l]) as isize;
-                let last = edge_lo[l] as isize;
-                j_chain |= 1 << l;
-                j_lo[l] = first;
-                j_hi[l] = if last < first { last + n } else { last };
-            }
-        }
+        let (edge_lo, edge_hi) = (index_vector(edge_lo), index_vector(edge_hi));
+        let j_chain = on_path
+            & !_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(edge_lo, edge_hi)));
+        let first = add_i(edge_hi, splat_i(1));
+        let first = _mm_andnot_si128(_mm_cmpeq_epi32(first, splat_i(turn)), first);
+        let last = add_i(
+            edge_lo,
+            _mm_and_si128(_mm_cmpgt_epi32(first, edge_lo), splat_i(turn)),
+        );
+        let (j_lo, j_hi) = (
+            select_i(zero_i, first, j_chain),
+            select_i(zero_i, last, j_chain),
+        );
 
         // The chord (the one-pair path's `Chord::between`).
         let chord = sub(p_hi, p_lo);
@@ -817,27 +921,20 @@ mod avx {
             _mm256_and_pd(cap_area_j, j_chain_mask),
         );
         for l in 0..4 {
-            if !has(on_path, l) {
-                continue;
-            }
-            let wrap = |k: isize| table.wrap(k) as i32;
-            let (depth_j, second) = if has(j_chain, l) {
-                let second = ChainHint {
-                    lo: wrap(j_lo[l]),
-                    hi: wrap(j_hi[l]),
-                };
-                (depth_j[l], second)
-            } else {
-                (0.0, ChainHint::NONE)
-            };
+            let depth_j = if has(j_chain, l) { depth_j[l] } else { 0.0 };
             out.normal_gap[l] = -0.5 * (depth_i[l] + depth_j);
-            out.hint[l] = PairHint {
-                first: ChainHint {
-                    lo: wrap(lo[l]),
-                    hi: wrap(hi[l]),
-                },
-                second,
-            };
+        }
+        // The next hints, pair by pair: without a chain of j its hint is none.
+        let none = splat_i(ChainHint::NONE.lo);
+        let rows = transpose_i([
+            wrap_i(lo, turn),
+            wrap_i(hi, turn),
+            select_i(none, wrap_i(j_lo, turn), j_chain),
+            select_i(none, wrap_i(j_hi, turn), j_chain),
+        ]);
+        for (hint, row) in out.hint.iter_mut().zip(rows) {
+            // SAFETY: a `PairHint` is four i32s (`repr(C)`).
+            _mm_storeu_si128((hint as *mut PairHint).cast::<I>(), row);
         }
     }
 }
