@@ -171,6 +171,12 @@ impl ContourTable {
         &self.edges[k]
     }
 
+    /// The unit polygon's edges, edge k from node k to node k + 1.
+    #[inline(always)]
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
     /// Index k + 1 modulo N, for k in [0, N): no division on the hot path.
     #[inline]
     pub fn next(&self, k: usize) -> usize {

@@ -143,7 +143,7 @@ pub fn grain_grain_block(
 #[allow(unsafe_op_in_unsafe_fn)]
 mod avx {
     use super::{BLOCK, BlockContacts, LanePair};
-    use crate::geometry::contour::{ContourTable, Edge};
+    use crate::geometry::contour::ContourTable;
     use crate::geometry::intersection::{ChainHint, PairHint};
     use std::arch::x86_64::*;
 
@@ -264,9 +264,21 @@ mod avx {
         [k[0] as isize, k[1] as isize, k[2] as isize, k[3] as isize]
     }
 
+    /// `ContourTable::next` of indices in [0, N): k + 1, N - 1 to 0.
     #[inline(always)]
-    unsafe fn index_vector(k: [usize; 4]) -> I {
-        _mm_set_epi32(k[3] as i32, k[2] as i32, k[1] as i32, k[0] as i32)
+    unsafe fn next_i(k: I, n: i32) -> I {
+        let next = add_i(k, splat_i(1));
+        _mm_andnot_si128(_mm_cmpeq_epi32(next, splat_i(n)), next)
+    }
+
+    /// `ContourTable::previous` of indices in [0, N): k - 1, 0 to N - 1.
+    #[inline(always)]
+    unsafe fn previous_i(k: I, n: i32) -> I {
+        let before = add_i(k, splat_i(-1));
+        add_i(
+            before,
+            _mm_and_si128(_mm_cmpgt_epi32(_mm_setzero_si128(), before), splat_i(n)),
+        )
     }
 
     /// `ContourTable::wrap` of indices within one turn of [0, N), [-N, 2N).
@@ -579,14 +591,21 @@ mod avx {
     }
 
     /// b's unit-polygon edges `s[l]`: starts, ends and outward normals.
+    ///
+    /// # Safety
+    /// Every `s[l]` lies in [0, N) (the guesses are hints checked to lie there, and
+    /// `exit_near` steps them round the polygon), and the processor has AVX.
     #[inline(always)]
-    unsafe fn edges(table: &ContourTable, s: [usize; 4]) -> [V2; 3] {
-        // SAFETY: an edge is its start, end and normal, six f64s in this order (`repr(C)`).
+    unsafe fn edges(table: &ContourTable, s: I) -> [V2; 3] {
+        let edges = table.edges().as_ptr();
+        let s = index_lanes(s);
+        debug_assert!(s.iter().all(|&k| 0 <= k && k < table.edges().len() as isize));
+        // An edge is its start, end and normal, six f64s in this order (`repr(C)`).
         let e = [
-            (table.edge(s[0]) as *const Edge).cast::<f64>(),
-            (table.edge(s[1]) as *const Edge).cast::<f64>(),
-            (table.edge(s[2]) as *const Edge).cast::<f64>(),
-            (table.edge(s[3]) as *const Edge).cast::<f64>(),
+            edges.offset(s[0]).cast::<f64>(),
+            edges.offset(s[1]).cast::<f64>(),
+            edges.offset(s[2]).cast::<f64>(),
+            edges.offset(s[3]).cast::<f64>(),
         ];
         let [start, end] = load_pairs(e, 0);
         // (normal 0 | normal 2) and (normal 1 | normal 3), interleaved into x's and y's. (No
@@ -616,8 +635,8 @@ mod avx {
         table: &ContourTable,
         p_in: V2,
         p_out: V2,
-        guess: [usize; 4],
-    ) -> (V, [usize; 4], Bits, [V2; 2]) {
+        guess: I,
+    ) -> (V, I, Bits, [V2; 2]) {
         let direction = sub(p_out, p_in);
         let apothem = _mm256_set1_pd(table.apothem);
         let (zero, one) = (_mm256_setzero_pd(), _mm256_set1_pd(1.0));
@@ -649,14 +668,16 @@ mod avx {
             found |= hit & within;
             t = _mm256_blendv_pd(t, t_try, mask(hit));
             open &= rising & !hit;
-            for (l, edge) in edge.iter_mut().enumerate() {
-                if has(open, l) {
-                    *edge = if has(after_start, l) {
-                        table.next(*edge)
-                    } else {
-                        table.previous(*edge)
-                    };
-                }
+            if open != 0 {
+                // The next edge round where the crossing lies after this one's start, else
+                // the one before.
+                let turn = table.nodes as i32;
+                let stepped = select_i(
+                    previous_i(edge, turn),
+                    next_i(edge, turn),
+                    after_start,
+                );
+                edge = select_i(edge, stepped, open);
             }
             if open == 0 {
                 break;
@@ -802,13 +823,8 @@ mod avx {
         let zero_i = _mm_setzero_si128();
         let mut lo = select_i(zero_i, first_lo, on_path);
         let mut hi = select_i(zero_i, chain_hi, on_path);
-        let guess_lo = index_lanes(select_i(zero_i, second_hi, on_path)).map(|k| k as usize);
-        let before = add_i(second_lo, splat_i(-1));
-        let before = add_i(
-            before,
-            _mm_and_si128(_mm_cmpgt_epi32(zero_i, before), splat_i(turn)),
-        );
-        let guess_hi = index_lanes(select_i(zero_i, before, on_path)).map(|k| k as usize);
+        let guess_lo = select_i(zero_i, second_hi, on_path);
+        let guess_hi = select_i(zero_i, previous_i(second_lo, turn), on_path);
 
         let branch = sub(center_i, center_j);
         let reach = _mm256_add_pd(reach_i, reach_j);
@@ -850,11 +866,9 @@ mod avx {
         let p_hi = crossing(center_i, map_i, vertex_hi, vertex_hi_out, t_hi);
         // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
         on_path &= found_lo & found_hi;
-        let (edge_lo, edge_hi) = (index_vector(edge_lo), index_vector(edge_hi));
         let j_chain = on_path
             & !_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(edge_lo, edge_hi)));
-        let first = add_i(edge_hi, splat_i(1));
-        let first = _mm_andnot_si128(_mm_cmpeq_epi32(first, splat_i(turn)), first);
+        let first = next_i(edge_hi, turn);
         let last = add_i(
             edge_lo,
             _mm_and_si128(_mm_cmpgt_epi32(first, edge_lo), splat_i(turn)),
