@@ -132,6 +132,18 @@ impl PairPass<'_> {
         let mut k = 0;
         while k < count {
             let p = first_pair + k;
+            if let Some(computed) = polygons.computed(k) {
+                self.one_pair::<FRICTIONAL>(
+                    p,
+                    computed,
+                    &mut states[k],
+                    &mut actives[k],
+                    &mut records[k],
+                    &mut sums,
+                );
+                k += 1;
+                continue;
+            }
             if k + LANES <= count && self.all_circles(p) {
                 for lane in 0..LANES {
                     self.prefetch_ahead(p + lane);
@@ -512,8 +524,18 @@ impl<'a> PolygonsAhead<'a> {
         }
     }
 
-    /// The contact of the chunk's pair `k` if a block computed it, computing a block from `k`
-    /// on first where `k` is on the common path; `None` leaves the pair to the one-pair path.
+    /// What the last block found of the chunk's pair `k`, where it holds the pair.
+    #[inline(always)]
+    fn computed(&mut self, k: usize) -> Option<LaneContact> {
+        if self.taken < self.filled && self.pairs[self.taken] == k {
+            self.taken += 1;
+            return Some(self.results.lane(self.taken - 1));
+        }
+        None
+    }
+
+    /// The contact of the chunk's pair `k` (not in the last block), computing a block from `k`
+    /// on where `k` is on the common path; `None` leaves the pair to the one-pair path.
     #[inline(always)]
     fn take(
         &mut self,
@@ -523,10 +545,6 @@ impl<'a> PolygonsAhead<'a> {
         states: &[PairState],
     ) -> LaneContact {
         let table = self.table?;
-        if self.taken < self.filled && self.pairs[self.taken] == k {
-            self.taken += 1;
-            return self.results.lane(self.taken - 1);
-        }
         if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
             return None;
         }
