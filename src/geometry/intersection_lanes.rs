@@ -22,49 +22,62 @@ use super::intersection::grain_grain_hinted;
 /// Pairs in a block of [`grain_grain_block`]: one AVX register's worth.
 pub const BLOCK: usize = 4;
 
-/// One grain of a pair as a block reads it: its centre, its map `A R` by columns and its
-/// bounding radius (see [`GrainShape`]), and whether it is a circle (1 or 0), which complete
-/// the second vector.
-#[derive(Debug, Clone, Copy, Default)]
-#[repr(C, align(32))]
-pub struct LaneShape([f64; 8]);
-
-impl LaneShape {
-    #[inline(always)]
-    pub fn of(shape: &GrainShape) -> Self {
-        let (c, m) = (shape.center, shape.map);
-        Self([
-            c.x,
-            c.y,
-            m.x_axis.x,
-            m.x_axis.y,
-            m.y_axis.x,
-            m.y_axis.y,
-            shape.bounding_radius,
-            if shape.circle { 1.0 } else { 0.0 },
-        ])
-    }
+/// One grain of a pair as a block reads it, where it lies: its centre and bounding radius,
+/// the first three of four `f64`s `[x, y, r, _]`, and its map `A R` by columns
+/// `[x0, x1, y0, y1]` (see [`GrainShape`]). Not a circle: the one-pair path takes a circle's
+/// inverse map as `1/r` times the identity, which a block does not, so such pairs are left to
+/// it.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneShape<'a> {
+    pub center_and_radius: &'a [f64; 4],
+    pub map: &'a [f64; 4],
 }
 
-/// One pair of a block: the two shapes (j's centre at the image that meets i) and the pair's
-/// hint from last step. A pair whose j is a circle (whose inverse map the one-pair path takes
-/// as `1/r` times the identity) leaves the path.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct LanePair {
-    pub i: LaneShape,
-    pub j: LaneShape,
-    pub hint: PairHint,
-}
+/// What a spare lane reads.
+static ZEROS: [f64; 4] = [0.0; 4];
 
-impl LanePair {
-    #[inline(always)]
-    pub fn new(i: &GrainShape, j: &GrainShape, hint: PairHint) -> Self {
+impl Default for LaneShape<'_> {
+    fn default() -> Self {
         Self {
-            i: LaneShape::of(i),
-            j: LaneShape::of(j),
-            hint,
+            center_and_radius: &ZEROS,
+            map: &ZEROS,
         }
     }
+}
+
+/// A [`LaneShape`]'s values, owned: the shape of a [`GrainShape`].
+#[derive(Debug, Clone, Copy)]
+pub struct OwnedLaneShape {
+    center_and_radius: [f64; 4],
+    map: [f64; 4],
+}
+
+impl OwnedLaneShape {
+    pub fn of(shape: &GrainShape) -> Self {
+        let c = shape.center;
+        Self {
+            center_and_radius: [c.x, c.y, shape.bounding_radius, 0.0],
+            map: shape.map.to_cols_array(),
+        }
+    }
+
+    pub fn lane_shape(&self) -> LaneShape<'_> {
+        LaneShape {
+            center_and_radius: &self.center_and_radius,
+            map: &self.map,
+        }
+    }
+}
+
+/// One pair of a block: the two shapes, the shift of j's centre to the image that meets i
+/// (added where the block is told the pairs are shifted, in a periodic cell), and the pair's
+/// hint from last step.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LanePair<'a> {
+    pub i: LaneShape<'a>,
+    pub j: LaneShape<'a>,
+    pub j_shift: DVec2,
+    pub hint: PairHint,
 }
 
 /// What a lane found: the pair's contact and its hint for next step, or `None` where the pair
@@ -124,16 +137,17 @@ pub fn block_available() -> bool {
 #[inline(never)]
 pub fn grain_grain_block(
     table: &ContourTable,
-    pairs: &[LanePair; BLOCK],
+    pairs: &[LanePair<'_>; BLOCK],
+    shifted: bool,
     contacts: &mut BlockContacts,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         // SAFETY: the processor has AVX (tested just above).
-        unsafe { avx::grain_grain_block(table, pairs, contacts) };
+        unsafe { avx::grain_grain_block(table, pairs, shifted, contacts) };
         return;
     }
-    let _ = (table, pairs);
+    let _ = (table, pairs, shifted);
     contacts.on_path = 0;
 }
 
@@ -314,7 +328,7 @@ mod avx {
 
     /// The pairs' hints as lanes: first.lo, first.hi, second.lo, second.hi.
     #[inline(always)]
-    unsafe fn hints(pairs: &[LanePair; BLOCK]) -> [I; 4] {
+    unsafe fn hints(pairs: &[LanePair<'_>; BLOCK]) -> [I; 4] {
         // SAFETY: a `PairHint` is four i32s (`repr(C)`).
         let row = |l: usize| (&pairs[l].hint as *const PairHint).cast::<I>();
         transpose_i([
@@ -608,21 +622,27 @@ mod avx {
             edges.offset(s[3]).cast::<f64>(),
         ];
         let [start, end] = load_pairs(e, 0);
-        // (normal 0 | normal 2) and (normal 1 | normal 3), interleaved into x's and y's. (No
-        // closure here: a closure is not compiled for AVX, and its intrinsics become calls.)
-        let n02 = _mm256_insertf128_pd::<1>(
-            _mm256_castpd128_pd256(_mm_loadu_pd(e[0].add(4))),
-            _mm_loadu_pd(e[2].add(4)),
-        );
-        let n13 = _mm256_insertf128_pd::<1>(
-            _mm256_castpd128_pd256(_mm_loadu_pd(e[1].add(4))),
-            _mm_loadu_pd(e[3].add(4)),
-        );
-        let normal = V2 {
-            x: _mm256_unpacklo_pd(n02, n13),
-            y: _mm256_unpackhi_pd(n02, n13),
-        };
+        let normal = load_points([e[0].add(4), e[1].add(4), e[2].add(4), e[3].add(4)]);
         [start, end, normal]
+    }
+
+    /// Two f64s from `lane[l]` in each lane `l`, read as a point of four lanes.
+    #[inline(always)]
+    unsafe fn load_points(lane: [*const f64; 4]) -> V2 {
+        // (point 0 | point 2) and (point 1 | point 3), interleaved into x's and y's. (No
+        // closure here: a closure is not compiled for AVX, and its intrinsics become calls.)
+        let p02 = _mm256_insertf128_pd::<1>(
+            _mm256_castpd128_pd256(_mm_loadu_pd(lane[0])),
+            _mm_loadu_pd(lane[2]),
+        );
+        let p13 = _mm256_insertf128_pd::<1>(
+            _mm256_castpd128_pd256(_mm_loadu_pd(lane[1])),
+            _mm_loadu_pd(lane[3]),
+        );
+        V2 {
+            x: _mm256_unpacklo_pd(p02, p13),
+            y: _mm256_unpackhi_pd(p02, p13),
+        }
     }
 
     /// Where a's edge from its node inside b (`p_in`, in b's reference coordinates) to the
@@ -752,18 +772,24 @@ mod avx {
         (_mm256_mul_pd(_mm256_set1_pd(0.5), twice_area), depth)
     }
 
-    /// A grain's centre, map and bounding radius, side i or j of each pair, and the lanes
-    /// where it is a circle.
+    /// A grain's centre, map and bounding radius, side i or j of each pair.
     #[inline(always)]
-    unsafe fn shapes(pairs: &[LanePair; BLOCK], second: bool) -> (V2, M2, V, Bits) {
-        let side = |l: usize| {
-            let shape = if second { &pairs[l].j } else { &pairs[l].i };
-            shape.0.as_ptr()
-        };
+    unsafe fn shapes(pairs: &[LanePair<'_>; BLOCK], second: bool) -> (V2, M2, V) {
+        let side = |l: usize| if second { pairs[l].j } else { pairs[l].i };
         let (a, b, c, d) = (side(0), side(1), side(2), side(3));
-        // SAFETY: each shape is eight f64s.
-        let [center, x_axis] = load_pairs([a, b, c, d], 0);
-        let [y_axis, radius] = load_pairs([a, b, c, d], 4);
+        let [center, radius] = load_pairs(
+            [
+                a.center_and_radius.as_ptr(),
+                b.center_and_radius.as_ptr(),
+                c.center_and_radius.as_ptr(),
+                d.center_and_radius.as_ptr(),
+            ],
+            0,
+        );
+        let [x_axis, y_axis] = load_pairs(
+            [a.map.as_ptr(), b.map.as_ptr(), c.map.as_ptr(), d.map.as_ptr()],
+            0,
+        );
         (
             center,
             M2 {
@@ -773,14 +799,14 @@ mod avx {
                 y1: y_axis.y,
             },
             radius.x,
-            bits(_mm256_cmp_pd::<_CMP_NEQ_UQ>(radius.y, _mm256_setzero_pd())),
         )
     }
 
     #[target_feature(enable = "avx")]
     pub(super) unsafe fn grain_grain_block(
         table: &ContourTable,
-        pairs: &[LanePair; BLOCK],
+        pairs: &[LanePair<'_>; BLOCK],
+        shifted: bool,
         out: &mut BlockContacts,
     ) {
         let n = table.nodes as isize;
@@ -811,15 +837,20 @@ mod avx {
         )));
         let short = greater_i(splat_i(half as i32), sub_i(chain_hi, first_lo));
 
-        let (center_i, map_i, reach_i, _) = shapes(pairs, false);
-        let (center_j, map_j, reach_j, j_circle) = shapes(pairs, true);
+        let (center_i, map_i, reach_i) = shapes(pairs, false);
+        let (mut center_j, map_j, reach_j) = shapes(pairs, true);
+        if shifted {
+            // A shift is two f64s (`DVec2` is `repr(C)`).
+            let shift = |l: usize| (&pairs[l].j_shift as *const glam::DVec2).cast::<f64>();
+            center_j = add(center_j, load_points([shift(0), shift(1), shift(2), shift(3)]));
+        }
         // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
         // ring is read without bounds checks (`ring4`), so every node index formed here lies
         // in [-N, 2N - 3) (N >= 8): a lane starts with hints in [0, N), checked above (a lane
         // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
         // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
         // j's chain runs within [0, 2N) with its middle under 3N / 2.
-        let mut on_path: Bits = hints_in_turn & short & !j_circle;
+        let mut on_path: Bits = hints_in_turn & short;
         let zero_i = _mm_setzero_si128();
         let mut lo = select_i(zero_i, first_lo, on_path);
         let mut hi = select_i(zero_i, chain_hi, on_path);
@@ -1018,18 +1049,44 @@ mod tests {
                 let (i, j, i_next, j_next) = pair_and_its_next_step(&mut next, step);
                 let mut hint = PairHint::default();
                 if let Overlap::Contact(_) = grain_grain_hinted(&table, &i, &j, &mut hint) {
-                    pairs.push((LanePair::new(&i_next, &j_next, hint), i_next, j_next));
+                    let shapes = [OwnedLaneShape::of(&i_next), OwnedLaneShape::of(&j_next)];
+                    pairs.push((shapes, hint, i_next, j_next));
                 }
             }
             for (block, rotation) in pairs.chunks_exact(4).zip(0..) {
                 let mut block: [_; BLOCK] = block.try_into().unwrap();
                 block.rotate_left(rotation % BLOCK);
-                let lanes = block.map(|(lane, _, _)| lane);
+                // Every other block meets j at an image: j's shape is stored moved back by the
+                // lane's shift, which the block adds (and the one-pair path sees j where the
+                // shift brings it back).
+                let shifted = rotation % 2 == 1;
+                let shift = |l: usize| DVec2::new(3.0, -5.0) * (l + 1) as f64;
+                let mut stored = block.map(|(shapes, _, _, _)| shapes);
+                if shifted {
+                    for (l, [_, j]) in stored.iter_mut().enumerate() {
+                        j.center_and_radius[0] -= shift(l).x;
+                        j.center_and_radius[1] -= shift(l).y;
+                    }
+                }
+                let mut lanes = [LanePair::default(); BLOCK];
+                for (l, lane) in lanes.iter_mut().enumerate() {
+                    *lane = LanePair {
+                        i: stored[l][0].lane_shape(),
+                        j: stored[l][1].lane_shape(),
+                        j_shift: if shifted { shift(l) } else { DVec2::ZERO },
+                        hint: block[l].1,
+                    };
+                }
                 let mut contacts = BlockContacts::default();
-                grain_grain_block(&table, &lanes, &mut contacts);
-                for (l, (pair, i, j)) in block.iter().enumerate() {
-                    let mut hint = pair.hint;
-                    let one = grain_grain_hinted(&table, i, j, &mut hint);
+                grain_grain_block(&table, &lanes, shifted, &mut contacts);
+                for (l, (_, start_hint, i, j)) in block.iter().enumerate() {
+                    let mut j = *j;
+                    if shifted {
+                        let [x, y, ..] = stored[l][1].center_and_radius;
+                        j.center = DVec2::new(x, y) + shift(l);
+                    }
+                    let mut hint = *start_hint;
+                    let one = grain_grain_hinted(&table, i, &j, &mut hint);
                     total += 1;
                     if let Some((contact, next_hint)) = contacts.lane(l) {
                         assert_eq!(one, Overlap::Contact(contact), "lane {l}");

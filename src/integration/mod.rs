@@ -36,6 +36,7 @@ use crate::geometry::affine::{AffineState, Mat2, map_and_velocity_gradient};
 use crate::geometry::angle;
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::contour::QUARTER_TURN;
+use crate::geometry::intersection_lanes::LaneShape;
 use crate::geometry::{Contours, GrainShape, PairHint};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::{Lanes, Real};
@@ -84,6 +85,13 @@ pub struct Frame {
     /// written for a circle.
     velocity_gradient: DMat2,
 }
+
+// What `Frame::lane_shape` reads: the centre and bounding radius at a block's offsets.
+const _: () = assert!(
+    std::mem::offset_of!(Frame, center) == 0
+        && std::mem::offset_of!(Frame, bounding_radius) == 16
+        && std::mem::offset_of!(Frame, mass) == 24
+);
 
 impl Frame {
     /// The frame of a grain at its current state.
@@ -233,6 +241,20 @@ impl Frame {
                 bounding_radius: self.bounding_radius,
                 circle: false,
             }
+        }
+    }
+
+    /// The shape as a block of polygon contacts reads it, in place; a grain that is not a
+    /// circle (a circle's map is not kept).
+    #[inline(always)]
+    pub fn lane_shape(&self) -> LaneShape<'_> {
+        debug_assert!(!self.circle);
+        // SAFETY: the frame is `repr(C)`, its first four fields four f64s (the centre is a
+        // `repr(C)` `DVec2`): checked at compile time below.
+        let center_and_radius = unsafe { &*(self as *const Frame).cast::<[f64; 4]>() };
+        LaneShape {
+            center_and_radius,
+            map: self.map.as_ref(),
         }
     }
 

@@ -83,7 +83,7 @@ struct Touch {
     effective_mass: f64,
 }
 
-impl PairPass<'_> {
+impl<'a> PairPass<'a> {
     /// The pairs of one chunk, the first of which is pair `first_pair`; returns their sums.
     pub fn chunk(
         &self,
@@ -188,17 +188,21 @@ impl PairPass<'_> {
             && !self.frames[j as usize].circle
     }
 
-    /// Pair `p`'s two shapes as its contact sees them (the second at the image that meets the
-    /// first) and its hint.
+    /// Pair `p`'s two shapes, read in place, the shift to the image of the second that meets
+    /// the first, and its hint.
     #[inline(always)]
-    fn lane_pair(&self, p: usize, hint: PairHint) -> LanePair {
+    fn lane_pair(&self, p: usize, hint: PairHint) -> LanePair<'a> {
         let [i, j] = self.pairs[p];
-        let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
-        let shape_j = GrainShape {
-            center: self.second_end(p, fi, fj).center,
-            ..fj.shape()
-        };
-        LanePair::new(&fi.shape(), &shape_j, hint)
+        let frames = self.frames;
+        LanePair {
+            i: frames[i as usize].lane_shape(),
+            j: frames[j as usize].lane_shape(),
+            j_shift: match &self.periodic {
+                Some((cell, _)) => cell.image_shift(self.images[p]),
+                None => DVec2::ZERO,
+            },
+            hint,
+        }
     }
 
     #[inline(always)]
@@ -499,7 +503,7 @@ struct PolygonsAhead<'a> {
     /// The block's pairs (chunk indices, increasing) and their results; `taken` of them used.
     pairs: [usize; BLOCK],
     /// The block's shapes and hints, kept from block to block (only their filling changes).
-    block: [LanePair; BLOCK],
+    block: [LanePair<'a>; BLOCK],
     results: BlockContacts,
     filled: usize,
     taken: usize,
@@ -539,7 +543,7 @@ impl<'a> PolygonsAhead<'a> {
     #[inline(always)]
     fn take(
         &mut self,
-        pass: &PairPass<'_>,
+        pass: &PairPass<'a>,
         k: usize,
         first_pair: usize,
         states: &[PairState],
@@ -566,7 +570,7 @@ impl<'a> PolygonsAhead<'a> {
         for lane in filled..BLOCK {
             block[lane] = block[0];
         }
-        grain_grain_block(table, block, &mut self.results);
+        grain_grain_block(table, block, pass.periodic.is_some(), &mut self.results);
         self.filled = filled;
         self.taken = 1;
         self.results.lane(0)
