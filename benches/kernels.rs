@@ -382,6 +382,95 @@ mod disc_pairs {
     }
 }
 
+/// The polygon contact's common path four pairs at a time (`grain_grain_block`, AVX) against
+/// the one-pair path four times, on four pairs at depths 0.01 to 0.15 of a diameter whose j
+/// moves back and forth by a tenth of a node spacing along the line of centres from call to
+/// call (a contact under load from step to step; a dense step moves a grain by far less). Each
+/// call takes the hints the last left; without AVX the block leaves every pair to the one-pair
+/// path, called here as the pair pass does.
+mod polygon_lanes {
+    use super::pair;
+    use sdem::geometry::intersection_lanes::{
+        BLOCK, BlockContacts, LanePair, OwnedLaneShape, grain_grain_block,
+    };
+    use sdem::geometry::{ContourTable, GrainShape, PairHint, grain_grain_hinted};
+    use std::hint::black_box;
+
+    /// The four pairs at both positions of j, and their hints after a first call.
+    fn moving_pairs(
+        table: &ContourTable,
+    ) -> ([[(GrainShape, GrainShape); 2]; BLOCK], [PairHint; BLOCK]) {
+        let mut hints = [PairHint::default(); BLOCK];
+        let pairs = std::array::from_fn(|l| {
+            let (i, j) = pair([0.01, 0.05, 0.15, 0.08][l]);
+            let mut j_moved = j;
+            j_moved.center.x -= 0.1 * 0.012 * table.dbeta;
+            grain_grain_hinted(table, &i, &j, &mut hints[l]);
+            [(i, j), (i, j_moved)]
+        });
+        (pairs, hints)
+    }
+
+    #[divan::bench]
+    fn four_in_lanes(bencher: divan::Bencher) {
+        let table = ContourTable::new(1.0);
+        let (pairs, mut hints) = moving_pairs(&table);
+        let shapes =
+            pairs.map(|at| at.map(|(i, j)| [OwnedLaneShape::of(&i), OwnedLaneShape::of(&j)]));
+        let mut contacts = BlockContacts::default();
+        let mut call = 0usize;
+        let mut on_path = 0;
+        bencher
+            .counter(divan::counter::ItemsCount::new(BLOCK))
+            .bench_local(|| {
+                call += 1;
+                let block: [LanePair; BLOCK] = std::array::from_fn(|l| {
+                    let [i, j] = &shapes[l][call & 1];
+                    LanePair {
+                        i: i.lane_shape(),
+                        j: j.lane_shape(),
+                        hint: hints[l],
+                        ..Default::default()
+                    }
+                });
+                grain_grain_block(&table, black_box(&block), false, &mut contacts);
+                for (l, hint) in hints.iter_mut().enumerate() {
+                    match contacts.lane(l) {
+                        Some((_, next)) => {
+                            *hint = next;
+                            on_path += 1;
+                        }
+                        None => {
+                            let (i, j) = &pairs[l][call & 1];
+                            grain_grain_hinted(&table, i, j, hint);
+                        }
+                    }
+                }
+                black_box(&contacts);
+            });
+        // What the bench means to time: where the processor has AVX, every lane on the path.
+        if sdem::geometry::intersection_lanes::block_available() {
+            assert_eq!(on_path, BLOCK * call, "lanes left the path");
+        }
+    }
+
+    #[divan::bench]
+    fn four_one_by_one(bencher: divan::Bencher) {
+        let table = ContourTable::new(1.0);
+        let (pairs, mut hints) = moving_pairs(&table);
+        let mut call = 0usize;
+        bencher
+            .counter(divan::counter::ItemsCount::new(BLOCK))
+            .bench_local(|| {
+                call += 1;
+                for (l, hint) in hints.iter_mut().enumerate() {
+                    let (i, j) = &pairs[l][call & 1];
+                    black_box(grain_grain_hinted(&table, black_box(i), black_box(j), hint));
+                }
+            });
+    }
+}
+
 /// Angles of grains that have turned for a while (tens of radians, as in a run's jammed state),
 /// in random order: what the frames' sines and cosines see.
 fn turned_angles(count: usize) -> Vec<f64> {

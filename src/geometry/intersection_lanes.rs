@@ -613,7 +613,10 @@ mod avx {
     unsafe fn edges(table: &ContourTable, s: I) -> [V2; 3] {
         let edges = table.edges().as_ptr();
         let s = index_lanes(s);
-        debug_assert!(s.iter().all(|&k| 0 <= k && k < table.edges().len() as isize));
+        debug_assert!(
+            s.iter()
+                .all(|&k| 0 <= k && k < table.edges().len() as isize)
+        );
         // An edge is its start, end and normal, six f64s in this order (`repr(C)`).
         let e = [
             edges.offset(s[0]).cast::<f64>(),
@@ -692,11 +695,7 @@ mod avx {
                 // The next edge round where the crossing lies after this one's start, else
                 // the one before.
                 let turn = table.nodes as i32;
-                let stepped = select_i(
-                    previous_i(edge, turn),
-                    next_i(edge, turn),
-                    after_start,
-                );
+                let stepped = select_i(previous_i(edge, turn), next_i(edge, turn), after_start);
                 edge = select_i(edge, stepped, open);
             }
             if open == 0 {
@@ -750,10 +749,7 @@ mod avx {
         let sum = add_i(lo, hi);
         // `>> 1` rounds down, as the one-pair path's on `isize`.
         let middle = _mm_srai_epi32::<1>(sum);
-        let start = _mm_max_epi32(
-            add_i(sub_i(middle, one), _mm_and_si128(sum, one)),
-            lo,
-        );
+        let start = _mm_max_epi32(add_i(sub_i(middle, one), _mm_and_si128(sum, one)), lo);
         let count = add_i(sub_i(_mm_min_epi32(add_i(middle, one), hi), start), one);
         // The lanes with more than one node, and with more than two.
         let more = [0, greater_i(count, one), greater_i(count, splat_i(2))];
@@ -787,7 +783,12 @@ mod avx {
             0,
         );
         let [x_axis, y_axis] = load_pairs(
-            [a.map.as_ptr(), b.map.as_ptr(), c.map.as_ptr(), d.map.as_ptr()],
+            [
+                a.map.as_ptr(),
+                b.map.as_ptr(),
+                c.map.as_ptr(),
+                d.map.as_ptr(),
+            ],
             0,
         );
         (
@@ -842,7 +843,10 @@ mod avx {
         if shifted {
             // A shift is two f64s (`DVec2` is `repr(C)`).
             let shift = |l: usize| (&pairs[l].j_shift as *const glam::DVec2).cast::<f64>();
-            center_j = add(center_j, load_points([shift(0), shift(1), shift(2), shift(3)]));
+            center_j = add(
+                center_j,
+                load_points([shift(0), shift(1), shift(2), shift(3)]),
+            );
         }
         // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
         // ring is read without bounds checks (`ring4`), so every node index formed here lies
@@ -872,10 +876,7 @@ mod avx {
         let (raw_hi, nodes_hi, moved_hi) = end_moved(table, m, t, hi, 1);
         // The lanes whose ends both moved by at most a node, into a chain still short: they
         // take the new ends; the others keep theirs and leave the path.
-        let (new_lo, new_hi) = (
-            sub_i(lo, moved_lo.offsets()),
-            add_i(hi, moved_hi.offsets()),
-        );
+        let (new_lo, new_hi) = (sub_i(lo, moved_lo.offsets()), add_i(hi, moved_hi.offsets()));
         let moved = moved_lo.settled()
             & moved_hi.settled()
             & near
@@ -897,8 +898,8 @@ mod avx {
         let p_hi = crossing(center_i, map_i, vertex_hi, vertex_hi_out, t_hi);
         // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
         on_path &= found_lo & found_hi;
-        let j_chain = on_path
-            & !_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(edge_lo, edge_hi)));
+        let j_chain =
+            on_path & !_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(edge_lo, edge_hi)));
         let first = next_i(edge_hi, turn);
         let last = add_i(
             edge_lo,
@@ -961,10 +962,7 @@ mod avx {
         store(&mut out.cap_area_i, cap_area_i);
         // Without a chain of j its cap and depth are zero.
         let j_chain_mask = mask(j_chain);
-        store(
-            &mut out.cap_area_j,
-            _mm256_and_pd(cap_area_j, j_chain_mask),
-        );
+        store(&mut out.cap_area_j, _mm256_and_pd(cap_area_j, j_chain_mask));
         for l in 0..4 {
             let depth_j = if has(j_chain, l) { depth_j[l] } else { 0.0 };
             out.normal_gap[l] = -0.5 * (depth_i[l] + depth_j);
