@@ -127,12 +127,33 @@ impl<'a> PairPass<'a> {
             }
             return sums;
         }
+        let polygons = PolygonsAhead::new(self.contours, self.every_frame_a_circle);
+        // A world of circles (the rigid level's) takes a loop without the polygon blocks' test.
+        if polygons.table.is_some() {
+            self.chunk_in_order::<FRICTIONAL, true>(first_pair, polygons, states, actives, records)
+        } else {
+            self.chunk_in_order::<FRICTIONAL, false>(first_pair, polygons, states, actives, records)
+        }
+    }
+
+    /// The chunk's pairs in order, circles in blocks where [`LANES`] consecutive pairs are
+    /// pairs of circles; `POLYGONS`: whether `polygons` computes blocks of polygon pairs.
+    #[inline(always)]
+    fn chunk_in_order<const FRICTIONAL: bool, const POLYGONS: bool>(
+        &self,
+        first_pair: usize,
+        mut polygons: PolygonsAhead<'a>,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
+        let mut sums = PairSums::default();
+        let count = states.len();
         let mut lanes = None;
-        let mut polygons = PolygonsAhead::new(self.contours, self.every_frame_a_circle);
         let mut k = 0;
         while k < count {
             let p = first_pair + k;
-            if let Some(computed) = polygons.computed(k) {
+            if POLYGONS && let Some(computed) = polygons.computed(k) {
                 self.one_pair::<FRICTIONAL>(
                     p,
                     computed,
@@ -162,7 +183,11 @@ impl<'a> PairPass<'a> {
                 k += LANES;
             } else {
                 self.prefetch_ahead(p);
-                let computed = polygons.take(self, k, first_pair, states);
+                let computed = if POLYGONS {
+                    polygons.take(self, k, first_pair, states)
+                } else {
+                    None
+                };
                 self.one_pair::<FRICTIONAL>(
                     p,
                     computed,
