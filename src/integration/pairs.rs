@@ -1203,6 +1203,126 @@ mod tests {
         }
     }
 
+    /// Deforming grains in pairs (grain 2k with grain 2k + 1) overlapping by up to a tenth of
+    /// a diameter, at `shift` times their given offsets (a step's motion), and each pair's
+    /// grains' velocities; with an image shift per pair in a periodic cell.
+    fn polygon_grains(seed: u64, shift: f64) -> (Vec<Grain>, Vec<[u32; 2]>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut random = |lo: f64, hi: f64| lo + (hi - lo) * unit_random(&mut rng);
+        let mut grains = Vec::new();
+        let mut pairs = Vec::new();
+        for k in 0..(6 * BLOCK + 3) {
+            let grain = |center: DVec2, random: &mut dyn FnMut(f64, f64) -> f64| {
+                let mut g = Grain::at_rest(center, random(0.8, 1.0));
+                (g.eps1, g.eps2) = (random(-0.1, 0.05), random(-0.1, 0.05));
+                (g.theta, g.alpha) = (random(-3.0, 3.0), random(-1.0, 1.0));
+                g.velocity = DVec2::new(random(-1.0, 1.0), random(-1.0, 1.0));
+                g.omega = random(-2.0, 2.0);
+                (g.eps1_rate, g.eps2_rate, g.alpha_rate) =
+                    (random(-0.1, 0.1), random(-0.1, 0.1), random(-0.5, 0.5));
+                g
+            };
+            let first = grain(DVec2::new(30.0 * k as f64, 0.0), &mut random);
+            let mut second = grain(DVec2::ZERO, &mut random);
+            let direction = DVec2::from_angle(random(0.0, 6.0));
+            // Within the sum of the grains' smallest semi-axes: always in contact.
+            let reach = |g: &Grain| g.radius * (1.0 + g.eps1.min(g.eps2));
+            let distance =
+                (reach(&first) + reach(&second)) * random(0.9, 0.98) + shift * random(-1e-3, 1e-3);
+            second.center = first.center + distance * direction;
+            pairs.push([grains.len() as u32, grains.len() as u32 + 1]);
+            grains.extend([first, second]);
+        }
+        (grains, pairs)
+    }
+
+    #[test]
+    fn polygon_pairs_in_blocks_give_the_one_pair_paths_bits() {
+        // Expectation: a pair computed in a block of polygon lanes is recorded exactly as the
+        // one-pair path records it from the same hint: every record, state, flag and sum the
+        // same, bit for bit, with and without friction, in a periodic cell (the second grain
+        // met at an image) and out of one. The hints come from a first pass over the pairs a
+        // step before, as in a run.
+        if !block_available() {
+            return;
+        }
+        let contours = Contours::new(1.0);
+        for (seed, friction, periodic) in [
+            (1, false, false),
+            (2, true, false),
+            (3, false, true),
+            (4, true, true),
+        ] {
+            let params = parameters(friction);
+            let cell = PeriodicCell::rectangle(DVec2::splat(-500.0), 1000.0, 1000.0).unwrap();
+            let velocity_gradient = DMat2::from_cols_array(&[0.01, 0.002, -0.003, -0.02]);
+            let frames_of = |shift: f64| {
+                let (grains, pairs) = polygon_grains(seed, shift);
+                let mut frames: Vec<Frame> =
+                    grains.iter().map(|g| Frame::of_grain(g, 1.0)).collect();
+                let mut images = Vec::new();
+                if periodic {
+                    for (p, &[_, j]) in pairs.iter().enumerate() {
+                        let image = [[0, 0], [1, 0], [-1, 1]][p % 3];
+                        frames[j as usize].center -= cell.image_shift(image);
+                        images.push(image);
+                    }
+                }
+                (frames, pairs, images)
+            };
+            let (before, pairs, images) = frames_of(0.0);
+            let (after, _, _) = frames_of(1.0);
+            let pass = |frames| PairPass {
+                params: &params,
+                contours: &contours,
+                frames,
+                pairs: &pairs,
+                images: &images,
+                step: 3,
+                periodic: periodic.then_some((cell, velocity_gradient)),
+                only_fast: None,
+                every_frame_a_circle: false,
+            };
+            let count = pairs.len();
+            let fresh = || {
+                (
+                    vec![PairState::default(); count],
+                    vec![false; count],
+                    vec![PairContact::default(); count],
+                )
+            };
+            let mut hinted = fresh();
+            pass(&before).chunk(0, &mut hinted.0, &mut hinted.1, &mut hinted.2);
+            let mut lanes = (hinted.0.clone(), hinted.1.clone(), hinted.2.clone());
+            let lane_sums = pass(&after).chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
+            let mut one = hinted;
+            let mut one_sums = PairSums::default();
+            for p in 0..count {
+                pass(&after).one_pair::<true>(
+                    p,
+                    None,
+                    &mut one.0[p],
+                    &mut one.1[p],
+                    &mut one.2[p],
+                    &mut one_sums,
+                );
+            }
+            assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
+            assert_eq!(
+                format!("{lane_sums:?}"),
+                format!("{one_sums:?}"),
+                "seed {seed}"
+            );
+            // Every pair touches, and has last step's chains to start from: the blocks' path
+            // (the lanes' own test counts how many leave it).
+            assert!(lanes.1.iter().all(|&a| a), "every pair in contact");
+            assert!(
+                (one.0.iter()).all(|state| state.hint.first.lo >= 0 && state.hint.second.lo >= 0),
+                "every pair with a hint"
+            );
+        }
+    }
+
     #[test]
     fn the_frames_shuffled_into_lanes_are_the_frames_set_lane_by_lane() {
         // Expectation: `set_circles` moves values and computes nothing: whatever instructions
