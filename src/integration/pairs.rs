@@ -1046,6 +1046,36 @@ mod tests {
     use crate::sample::unit_random;
     use rand::SeedableRng;
 
+    /// A chunk's pairs' states, flags and records.
+    type Slots = (Vec<PairState>, Vec<bool>, Vec<PairContact>);
+
+    /// `pass.chunk` over all of the pass's pairs from `start`, held to the one-pair path pair
+    /// by pair as it handles any world (with FRICTIONAL, a world without friction gets a zero
+    /// tangential response; `chunk` takes the frictionless pass where there is no friction and
+    /// must give the same bits): every record, state, flag and sum the same, bit for bit,
+    /// signed zeros included. Returns the chunk's slots and sums.
+    fn chunk_is_one_pair_by_pair(
+        pass: &PairPass<'_>,
+        start: &Slots,
+        seed: u64,
+    ) -> (Slots, PairSums) {
+        let mut lanes = start.clone();
+        let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
+        let mut one = start.clone();
+        let mut one_sums = PairSums::default();
+        for p in 0..start.0.len() {
+            let (state, active, record) = (&mut one.0[p], &mut one.1[p], &mut one.2[p]);
+            pass.one_pair::<true>(p, None, state, active, record, &mut one_sums);
+        }
+        assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
+        assert_eq!(
+            format!("{lane_sums:?}"),
+            format!("{one_sums:?}"),
+            "seed {seed}"
+        );
+        (lanes, lane_sums)
+    }
+
     /// Pairs of circles (grain 2k with grain 2k + 1) at every kind of separation: apart, shallow
     /// and deep overlaps (caps past the series' range, the law out of its domain), one circle
     /// swallowing the other, and grazing. The count is not a multiple of the lanes, so that the
@@ -1156,37 +1186,12 @@ mod tests {
                     ..Default::default()
                 })
                 .collect();
-            let mut lanes = (
-                start.clone(),
-                vec![false; count],
-                vec![PairContact::default(); count],
-            );
-            let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
-            let mut one = (
+            let start = (
                 start,
                 vec![false; count],
                 vec![PairContact::default(); count],
             );
-            let mut one_sums = PairSums::default();
-            // The one-pair path as it handles any world (with FRICTIONAL, a world without
-            // friction gets a zero tangential response): `chunk` takes the frictionless pass
-            // where there is no friction, and must give the same bits.
-            for p in 0..count {
-                pass.one_pair::<true>(
-                    p,
-                    None,
-                    &mut one.0[p],
-                    &mut one.1[p],
-                    &mut one.2[p],
-                    &mut one_sums,
-                );
-            }
-            assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
-            assert_eq!(
-                format!("{lane_sums:?}"),
-                format!("{one_sums:?}"),
-                "seed {seed}"
-            );
+            let (lanes, lane_sums) = chunk_is_one_pair_by_pair(&pass, &start, seed);
             // The cases the test means to cover are there.
             let touching = lanes.1.iter().filter(|&&a| a).count();
             assert!(
@@ -1293,31 +1298,12 @@ mod tests {
             };
             let mut hinted = fresh();
             pass(&before).chunk(0, &mut hinted.0, &mut hinted.1, &mut hinted.2);
-            let mut lanes = (hinted.0.clone(), hinted.1.clone(), hinted.2.clone());
-            let lane_sums = pass(&after).chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
-            let mut one = hinted;
-            let mut one_sums = PairSums::default();
-            for p in 0..count {
-                pass(&after).one_pair::<true>(
-                    p,
-                    None,
-                    &mut one.0[p],
-                    &mut one.1[p],
-                    &mut one.2[p],
-                    &mut one_sums,
-                );
-            }
-            assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
-            assert_eq!(
-                format!("{lane_sums:?}"),
-                format!("{one_sums:?}"),
-                "seed {seed}"
-            );
+            let (lanes, _) = chunk_is_one_pair_by_pair(&pass(&after), &hinted, seed);
             // Every pair touches, and has last step's chains to start from: the blocks' path
             // (the lanes' own test counts how many leave it).
             assert!(lanes.1.iter().all(|&a| a), "every pair in contact");
             assert!(
-                (one.0.iter()).all(|state| state.hint.first.lo >= 0 && state.hint.second.lo >= 0),
+                (lanes.0.iter()).all(|state| state.hint.first.lo >= 0 && state.hint.second.lo >= 0),
                 "every pair with a hint"
             );
         }
