@@ -580,9 +580,11 @@ impl<'a> PolygonsAhead<'a> {
             return None;
         }
         let block = &mut self.block;
-        let mut filled = 0;
-        let window = &states[k..(k + POLYGON_WINDOW).min(states.len())];
-        for (ahead, state) in (k..).zip(window) {
+        block[0] = pass.lane_pair(first_pair + k, states[k].hint);
+        self.pairs[0] = k;
+        let mut filled = 1;
+        let window = &states[k + 1..(k + POLYGON_WINDOW).min(states.len())];
+        for (ahead, state) in (k + 1..).zip(window) {
             let hint = state.hint;
             if pass.on_polygon_path(first_pair + ahead, &hint) {
                 block[filled] = pass.lane_pair(first_pair + ahead, hint);
