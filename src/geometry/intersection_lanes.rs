@@ -130,10 +130,12 @@ pub fn block_available() -> bool {
     false
 }
 
-/// The contacts of [`BLOCK`] pairs on the common path (see the module's docs): each `Some` is
-/// what [`grain_grain_hinted`] returns for that pair (always a contact there) and the hint it
-/// leaves; `None` where the pair leaves the path, or every lane without AVX. Out of line, so
-/// that the lanes stay in vector registers.
+/// The contacts of [`BLOCK`] pairs on the common path (see the module's docs), written to
+/// `contacts`: each lane's [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for
+/// that pair (always a contact there) and the hint it leaves; `None` where the pair leaves the
+/// path, or every lane without AVX. Neither grain of a pair is a circle ([`LaneShape`]);
+/// `shifted`: j's centres are moved by the pairs' `j_shift` (a periodic cell's images). Out of
+/// line, so that the lanes stay in vector registers.
 #[inline(never)]
 pub fn grain_grain_block(
     table: &ContourTable,
