@@ -597,7 +597,7 @@ mod avx {
     }
 
     /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and the masks
-    /// of the end's offsets ([`moved_masks`]).
+    /// of the end's offsets ([`Moved::masks`]).
     #[inline(always)]
     unsafe fn end_and_beyond(nodes: &[V2; 4], (back, on): (V, V)) -> (V2, V2) {
         (
@@ -693,16 +693,14 @@ mod avx {
             found |= hit & within;
             t = _mm256_blendv_pd(t, t_try, mask(hit));
             open &= rising & !hit;
-            if open != 0 {
-                // The next edge round where the crossing lies after this one's start, else
-                // the one before.
-                let turn = table.nodes as i32;
-                let stepped = select_i(previous_i(edge, turn), next_i(edge, turn), after_start);
-                edge = select_i(edge, stepped, open);
-            }
             if open == 0 {
                 break;
             }
+            // The next edge round where the crossing lies after this one's start, else the one
+            // before.
+            let turn = table.nodes as i32;
+            let stepped = select_i(previous_i(edge, turn), next_i(edge, turn), after_start);
+            edge = select_i(edge, stepped, open);
         }
         (t, edge, found, ends)
     }
@@ -814,12 +812,6 @@ mod avx {
     ) {
         let n = table.nodes as isize;
         let half = n / 2;
-        // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
-        // ring is read without bounds checks (`ring4`), so every node index formed here lies
-        // in [-N, 2N - 3) (N >= 8): a lane starts with hints in [0, N), checked below (a lane
-        // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
-        // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
-        // j's chain runs within [0, 2N) with its middle under 3N / 2.
         let turn = n as i32;
         // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
         // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on

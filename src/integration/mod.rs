@@ -250,7 +250,7 @@ impl Frame {
     pub fn lane_shape(&self) -> LaneShape<'_> {
         debug_assert!(!self.circle);
         // SAFETY: the frame is `repr(C)`, its first four fields four f64s (the centre is a
-        // `repr(C)` `DVec2`): checked at compile time below.
+        // `repr(C)` `DVec2`): checked at compile time (the assertion before `impl Frame`).
         let center_and_radius = unsafe { &*(self as *const Frame).cast::<[f64; 4]>() };
         LaneShape {
             center_and_radius,

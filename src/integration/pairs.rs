@@ -1210,9 +1210,10 @@ mod tests {
         }
     }
 
-    /// Deforming grains in pairs (grain 2k with grain 2k + 1) overlapping by up to a tenth of
-    /// a diameter, at `shift` times their given offsets (a step's motion), and each pair's
-    /// grains' velocities; with an image shift per pair in a periodic cell.
+    /// Deforming, moving grains in pairs (grain 2k with grain 2k + 1), each pair in contact
+    /// (its centres closer than the sum of its grains' smallest semi-axes). `shift` 1 moves
+    /// each second grain along the line of centres by up to 1e-3 from where `shift` 0 puts it,
+    /// a step's motion: the same draws either way.
     fn polygon_grains(seed: u64, shift: f64) -> (Vec<Grain>, Vec<[u32; 2]>) {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let mut random = |lo: f64, hi: f64| lo + (hi - lo) * unit_random(&mut rng);
