@@ -275,34 +275,33 @@ impl GrainPass<'_> {
     /// [`PairContact::force_on_first_in`]).
     #[inline(always)]
     fn pair_load<const FRICTIONAL: bool>(&self, g: usize, frame: &Frame) -> ContactLoad {
-        let (neighbors, pair_active, pair_contacts) =
-            (self.neighbors, self.pair_active, self.pair_contacts);
         let mut load = ContactLoad::default();
-        // Two plain loops: one iterator chaining the two cost 29 instructions a grain-step in
-        // the gas.
-        for &pair in neighbors.second_ends_of(g) {
-            let pair = pair as usize;
-            if !pair_active[pair] {
-                continue;
+        // One loop over the second ends for each case of the cell, so that the loop does not
+        // ask which case it is in at every pair.
+        match &self.cell {
+            None => self.add_second_ends::<FRICTIONAL>(g, frame.center, |_| DVec2::ZERO, &mut load),
+            Some(cell) => {
+                let images = &self.neighbors.images;
+                assert!(images.len() == self.neighbors.pairs.len());
+                self.add_second_ends::<FRICTIONAL>(
+                    g,
+                    frame.center,
+                    // SAFETY: `add_second_ends` calls this with indices of the list's pairs
+                    // only, and in a cell the list has an image for each pair (asserted
+                    // above).
+                    |pair| cell.image_shift(unsafe { *images.get_unchecked(pair) }),
+                    &mut load,
+                )
             }
-            let c = &pair_contacts[pair];
-            // The contact point lies at the image of this grain that met the first.
-            let image = match &self.cell {
-                Some(cell) => cell.image_shift(neighbors.images[pair]),
-                None => DVec2::ZERO,
-            };
-            load.add(
-                -c.force_on_first_in::<FRICTIONAL>(),
-                c.point - (frame.center + image),
-                c.cap_area_second,
-            );
-            load.contacts += 1;
         }
-        for pair in neighbors.first_ends_of(g) {
-            if !pair_active[pair] {
+        // The first ends are a run of the list: one bounds check for the run.
+        let run = self.neighbors.first_ends_of(g);
+        let active = &self.pair_active[run.clone()];
+        let contacts = &self.pair_contacts[run];
+        for (&active, c) in active.iter().zip(contacts) {
+            if !active {
                 continue;
             }
-            let c = &pair_contacts[pair];
             load.add(
                 c.force_on_first_in::<FRICTIONAL>(),
                 c.point - frame.center,
@@ -311,6 +310,45 @@ impl GrainPass<'_> {
             load.contacts += 1;
         }
         load
+    }
+
+    /// Adds to `load` the forces of the pairs `[i, g]` on their second grain g, centred at
+    /// `center`; `image(pair)`: the shift of the image of g that met the pair's first grain.
+    #[inline(always)]
+    fn add_second_ends<const FRICTIONAL: bool>(
+        &self,
+        g: usize,
+        center: DVec2,
+        image: impl Fn(usize) -> DVec2,
+        load: &mut ContactLoad,
+    ) {
+        let (pair_active, pair_contacts) = (self.pair_active, self.pair_contacts);
+        // The list's ends index its pairs, and the pair pass's records have one entry a pair.
+        let pairs = self.neighbors.pairs.len();
+        assert!(pair_active.len() == pairs && pair_contacts.len() == pairs);
+        for &pair in self.neighbors.second_ends_of(g) {
+            let pair = pair as usize;
+            debug_assert!(pair < pairs);
+            // SAFETY: `pair` is an entry of the list's index of second ends, which holds
+            // indices of its pairs only (`NeighborList::index_pairs_by_grain`), and both
+            // slices have one entry for each of the list's pairs (asserted above).
+            let (active, c) = unsafe {
+                (
+                    *pair_active.get_unchecked(pair),
+                    pair_contacts.get_unchecked(pair),
+                )
+            };
+            if !active {
+                continue;
+            }
+            // The contact point lies at the image of this grain that met the first.
+            load.add(
+                -c.force_on_first_in::<FRICTIONAL>(),
+                c.point - (center + image(pair)),
+                c.cap_area_second,
+            );
+            load.contacts += 1;
+        }
     }
 }
 
