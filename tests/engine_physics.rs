@@ -373,7 +373,7 @@ fn volumetric_and_full_levels_agree_under_isotropic_load() {
     );
     assert!(a.eps1 < 0.0);
     let (s1, _) = principal_stress(
-        &full.params.material,
+        &full.params.material.moduli(),
         a.eps1,
         a.eps2,
         full.grain_stress[0].lost_area / (PI * 0.25),

@@ -31,6 +31,15 @@ impl Material {
         }
     }
 
+    /// The moduli the grain laws below read (see [`Moduli`]).
+    pub fn moduli(&self) -> Moduli {
+        Moduli {
+            shear: self.shear_modulus(),
+            bulk: self.bulk_modulus(),
+            incompressible: self.is_incompressible(),
+        }
+    }
+
     pub fn is_incompressible(&self) -> bool {
         self.poisson >= 0.5
     }
@@ -52,6 +61,18 @@ impl Material {
     }
 }
 
+/// A [`Material`]'s moduli, computed once: the grain pass reads them for every grain of a
+/// step, and each is a division.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Moduli {
+    /// Shear modulus mu, [`Material::shear_modulus`].
+    pub shear: f64,
+    /// Bulk modulus kappa, [`Material::bulk_modulus`] (infinite when incompressible).
+    pub bulk: f64,
+    /// [`Material::is_incompressible`].
+    pub incompressible: bool,
+}
+
 /// Volumetric strain of eq. 41: `(1+eps1)(1+eps2) - lost_fraction - 1`.
 #[inline]
 pub fn volumetric_strain(eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
@@ -62,19 +83,14 @@ pub fn volumetric_strain(eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
 /// Compressible: `sigma_i = 2 mu eps_idev + kappa eps_V` (eq. 42–43 with eps1dev = -eps2dev);
 /// incompressible: `sigma_i = 2 mu eps_idev` (eq. 65–66).
 #[inline]
-pub fn principal_stress(
-    material: &Material,
-    eps1: f64,
-    eps2: f64,
-    lost_fraction: f64,
-) -> (f64, f64) {
-    let mu = material.shear_modulus();
+pub fn principal_stress(moduli: &Moduli, eps1: f64, eps2: f64, lost_fraction: f64) -> (f64, f64) {
+    let mu = moduli.shear;
     let half_difference = 0.5 * (eps1 - eps2);
     let (dev1, dev2) = (2.0 * mu * half_difference, -2.0 * mu * half_difference);
-    if material.is_incompressible() {
+    if moduli.incompressible {
         (dev1, dev2)
     } else {
-        let pressure_part = material.bulk_modulus() * volumetric_strain(eps1, eps2, lost_fraction);
+        let pressure_part = moduli.bulk * volumetric_strain(eps1, eps2, lost_fraction);
         (dev1 + pressure_part, dev2 + pressure_part)
     }
 }
@@ -82,14 +98,14 @@ pub fn principal_stress(
 /// Strain energy per unit reference area: `mu (d1^2 + d2^2) + kappa/2 eps_V^2` (the deviatoric
 /// part alone when incompressible).
 #[inline]
-pub fn strain_energy_density(material: &Material, eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
+pub fn strain_energy_density(moduli: &Moduli, eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
     let half_difference = 0.5 * (eps1 - eps2);
-    let deviatoric = 2.0 * material.shear_modulus() * half_difference * half_difference;
-    if material.is_incompressible() {
+    let deviatoric = 2.0 * moduli.shear * half_difference * half_difference;
+    if moduli.incompressible {
         deviatoric
     } else {
         let ev = volumetric_strain(eps1, eps2, lost_fraction);
-        deviatoric + 0.5 * material.bulk_modulus() * ev * ev
+        deviatoric + 0.5 * moduli.bulk * ev * ev
     }
 }
 
@@ -121,7 +137,7 @@ mod tests {
                 density: 1.0,
             };
             let h = 1e-7;
-            let d = |e1: f64, e2: f64| principal_stress(&m, e1, e2, 0.0);
+            let d = |e1: f64, e2: f64| principal_stress(&m.moduli(), e1, e2, 0.0);
             let column = |k: usize| {
                 let (p, q) = if k == 0 {
                     (d(h, 0.0), d(-h, 0.0))
@@ -166,7 +182,7 @@ mod tests {
             poisson: 0.3,
             density: 1.0,
         };
-        let (s1, s2) = principal_stress(&m, 1e-6, -2e-6, 0.0);
+        let (s1, s2) = principal_stress(&m.moduli(), 1e-6, -2e-6, 0.0);
         assert!(((s1 - s2) - 2.0 * m.shear_modulus() * 3e-6).abs() < 1e-18);
         let ev = volumetric_strain(1e-6, -2e-6, 0.0);
         assert!((0.5 * (s1 + s2) - m.bulk_modulus() * ev).abs() < 1e-18);

@@ -15,7 +15,9 @@ use crate::geometry::broadphase::NeighborList;
 use crate::geometry::circle::disc_wall;
 use crate::geometry::{Contours, Overlap, angle};
 use crate::grain::adaptive::stress_invariants;
-use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
+use crate::grain::constitutive::{
+    Moduli, incompressible_strains, principal_stress, strain_energy_density,
+};
 use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::Lanes;
 use glam::{DMat2, DVec2};
@@ -121,6 +123,7 @@ impl GrainPass<'_> {
         let density = params.material.density;
         let mut sums = ChunkSums::default();
         let near_wall = walls_in_reach(chunk.centers, chunk.reach, walls);
+        let constants = UpdateConstants::new(params);
         // Not zeroed first: the 4 KB memset was 16 instructions a grain-step under callgrind
         // (`rep stosb`), and every entry a grain reads is written.
         let mut directions = [MaybeUninit::<DVec2>::uninit(); GRAIN_CHUNK];
@@ -248,6 +251,7 @@ impl GrainPass<'_> {
                 grain,
                 level,
                 &load,
+                &constants,
                 directions[k],
                 g,
                 step,
@@ -565,6 +569,29 @@ impl ContactLoad {
     }
 }
 
+/// What every grain's update reads that depends on the parameters alone, computed once a
+/// chunk: some were divisions, and together some 20 instructions a grain-step.
+struct UpdateConstants {
+    moduli: Moduli,
+    /// `E / rho`, the square of the elastic wave speed (see [`check_grain`]).
+    wave_speed_squared: f64,
+    /// `1 / E`, the scale of the adaptive level's stresses.
+    inv_young: f64,
+    gravity: Option<DVec2>,
+}
+
+impl UpdateConstants {
+    fn new(params: &Parameters) -> Self {
+        let material = &params.material;
+        Self {
+            moduli: material.moduli(),
+            wave_speed_squared: material.young / material.density,
+            inv_young: 1.0 / material.young,
+            gravity: (params.gravity != DVec2::ZERO).then_some(params.gravity),
+        }
+    }
+}
+
 struct GrainUpdate {
     result: Result<(), Instability>,
     stress: GrainStress,
@@ -584,6 +611,7 @@ fn advance_grain(
     grain: &mut Grain,
     level: &mut GrainLevel,
     load: &ContactLoad,
+    constants: &UpdateConstants,
     e1: DVec2,
     index: usize,
     step: u64,
@@ -608,7 +636,8 @@ fn advance_grain(
             e1.dot(external * e2),
         )
     };
-    let (sigma1, sigma2) = principal_stress(material, grain.eps1, grain.eps2, lost_fraction);
+    let moduli = &constants.moduli;
+    let (sigma1, sigma2) = principal_stress(moduli, grain.eps1, grain.eps2, lost_fraction);
     let stress = GrainStress {
         external: [external.x_axis.x, external.y_axis.y, external.y_axis.x],
         principal: [sigma1, sigma2],
@@ -617,13 +646,13 @@ fn advance_grain(
         wall_contacts: load.wall_contacts,
     };
     let elastic_energy =
-        reference_area * strain_energy_density(material, grain.eps1, grain.eps2, lost_fraction);
+        reference_area * strain_energy_density(moduli, grain.eps1, grain.eps2, lost_fraction);
 
     // Rigid-body motion.
     let mass = grain.mass(density);
     grain.velocity += load.force * (dt / mass);
-    if params.gravity != DVec2::ZERO {
-        grain.velocity += params.gravity * dt;
+    if let Some(gravity) = constants.gravity {
+        grain.velocity += gravity * dt;
     }
     grain.omega += load.torque / grain.rotational_inertia_of_mass(mass) * dt;
     grain.center += grain.velocity * dt;
@@ -667,7 +696,7 @@ fn advance_grain(
             grain.alpha += grain.alpha_rate * dt;
         }
     }
-    if material.is_incompressible() && level.level != ModelLevel::Rigid {
+    if moduli.incompressible && level.level != ModelLevel::Rigid {
         // SPEC §6: keep the deviator, restore the area; the mean strain rate follows the
         // corrected mean strain so that rates stay consistent with positions.
         let mean_before =
@@ -683,7 +712,7 @@ fn advance_grain(
 
     if let Some(adaptive) = &params.adaptive {
         let (mean, deviator) = stress_invariants(stress.external);
-        let inv_young = 1.0 / material.young;
+        let inv_young = constants.inv_young;
         for _ in 0..level_steps {
             let next = adaptive
                 .settings
@@ -695,7 +724,7 @@ fn advance_grain(
         }
     }
 
-    let result = check_grain(grain, material.young / density, index, step);
+    let result = check_grain(grain, constants.wave_speed_squared, index, step);
     GrainUpdate {
         result,
         stress,
