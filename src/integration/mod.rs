@@ -556,6 +556,9 @@ pub struct World {
     /// frames' flags of each pair first (issue #16: 63 instructions a grain-step of rigid
     /// discs under callgrind).
     frames_all_circles: bool,
+    /// Whether no frame is a circle, kept with the frames: then the pair pass reads no frame's
+    /// flag to choose a pair's path (a world at the full level).
+    frames_no_circle: bool,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
     /// whether it touched in the last step,
@@ -646,6 +649,7 @@ impl World {
             frames: Vec::with_capacity(n),
             frames_current: false,
             frames_all_circles: false,
+            frames_no_circle: false,
             pair_state: Vec::new(),
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
@@ -855,6 +859,7 @@ impl World {
                     *reach = frame.bounding_radius;
                 });
             self.frames_all_circles = self.frames.par_iter().all(|frame| frame.circle);
+            self.frames_no_circle = !self.frames.par_iter().any(|frame| frame.circle);
             self.frames_current = true;
         }
         let frames_done = Instant::now();
@@ -946,6 +951,7 @@ impl World {
                 .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
             only_fast: only_fast.then_some(self.fast.as_slice()),
             every_frame_a_circle: self.frames_all_circles,
+            no_frame_a_circle: self.frames_no_circle,
         };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,
@@ -1258,6 +1264,7 @@ impl World {
         self.frames_current = true;
         let circle_frames: usize = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
         self.frames_all_circles = circle_frames == self.frames.len();
+        self.frames_no_circle = circle_frames == 0;
 
         let mut ends = PassEnds::default();
         for sums in &chunk_sums {
@@ -1577,14 +1584,22 @@ mod tests {
                 world.frames_all_circles
             ));
         }
+        let no_circle = !world.frames.iter().any(|frame| frame.circle);
+        if world.frames_no_circle != no_circle {
+            return Err(format!(
+                "frames_no_circle is {}, no frame a circle: {no_circle}",
+                world.frames_no_circle
+            ));
+        }
         Ok(())
     }
 
     #[test]
-    fn the_pair_pass_is_told_every_frame_is_a_circle_only_when_each_is() {
+    fn the_pair_pass_is_told_every_frame_or_none_is_a_circle_only_when_so() {
         // Expectation: the flag that sends every block of pairs to the circle lanes follows
         // the frames, whichever pass writes them: set in a world of rigid discs, cleared as
-        // soon as one grain deforms, set again when it is a disc again.
+        // soon as one grain deforms, set again when it is a disc again; and so does the flag
+        // that no frame is a circle.
         let mut world = crate::run::bench::dense_packing(100, 1.0);
         crate::run::bench::with_model(&mut world, ModelLevel::Rigid);
         world.step().unwrap();
@@ -1605,6 +1620,22 @@ mod tests {
         world.grains_mut()[37].eps2 = world.grains()[37].eps1;
         world.step().unwrap();
         assert!(world.frames_all_circles);
+        frames_match_grains(&world).unwrap();
+        // And the flag that spares the pair pass the frames' flags: set once no frame is a
+        // circle, cleared when one is again.
+        assert!(!world.frames_no_circle);
+        let mut levels = vec![GrainLevel::new(ModelLevel::Full); world.grains.len()];
+        world.set_levels(&levels);
+        for _ in 0..3 {
+            world.step().unwrap();
+            assert!(world.frames_no_circle && !world.frames_all_circles);
+            frames_match_grains(&world).unwrap();
+        }
+        levels[12] = GrainLevel::new(ModelLevel::Rigid);
+        world.set_levels(&levels);
+        world.grains_mut()[12].eps2 = world.grains()[12].eps1;
+        world.step().unwrap();
+        assert!(!world.frames_no_circle);
         frames_match_grains(&world).unwrap();
     }
 

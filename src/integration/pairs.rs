@@ -61,6 +61,9 @@ pub(super) struct PairPass<'a> {
     pub only_fast: Option<&'a [bool]>,
     /// Whether every frame is a circle (then so is every pair).
     pub every_frame_a_circle: bool,
+    /// Whether no frame is a circle (then no pair has one): a world at the full level asks no
+    /// frame whether it is one.
+    pub no_frame_a_circle: bool,
 }
 
 /// Where the second grain of a pair is met: the centre of its image that meets the first, the
@@ -208,11 +211,12 @@ impl<'a> PairPass<'a> {
     /// not circles, whose contours crossed last step.
     #[inline(always)]
     fn on_polygon_path(&self, p: usize, hint: &PairHint) -> bool {
-        let [i, j] = self.pairs[p];
         hint.first.lo >= 0
             && hint.second.lo >= 0
-            && !self.frames[i as usize].circle
-            && !self.frames[j as usize].circle
+            && (self.no_frame_a_circle || {
+                let [i, j] = self.pairs[p];
+                !self.frames[i as usize].circle && !self.frames[j as usize].circle
+            })
     }
 
     /// Pair `p`'s two shapes, read in place, the shift to the image of the second that meets
@@ -242,10 +246,11 @@ impl<'a> PairPass<'a> {
     /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
     #[inline(always)]
     fn all_circles(&self, p: usize) -> bool {
-        self.every_frame_a_circle
-            || self.pairs[p..p + LANES]
-                .iter()
-                .all(|&[i, j]| self.frames[i as usize].circle && self.frames[j as usize].circle)
+        !self.no_frame_a_circle
+            && (self.every_frame_a_circle
+                || self.pairs[p..p + LANES].iter().all(|&[i, j]| {
+                    self.frames[i as usize].circle && self.frames[j as usize].circle
+                }))
     }
 
     #[inline(always)]
@@ -1180,6 +1185,7 @@ mod tests {
                 only_fast: None,
                 // Every frame here is a circle: told so, or found so block by block.
                 every_frame_a_circle: seed % 2 == 1,
+                no_frame_a_circle: false,
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)
@@ -1290,6 +1296,7 @@ mod tests {
                 periodic: periodic.then_some((cell, velocity_gradient)),
                 only_fast: None,
                 every_frame_a_circle: false,
+                no_frame_a_circle: false,
             };
             let count = pairs.len();
             let fresh = || {
