@@ -461,16 +461,24 @@ fn principal_directions<'a>(
 ) -> &'a [DVec2] {
     let n = grains.len();
     assert!(n <= GRAIN_CHUNK && levels.len() == n);
+    write_principal_directions(grains, levels, directions);
+    // SAFETY: the first `n` entries were written just above.
+    unsafe { std::slice::from_raw_parts(directions.as_ptr().cast::<DVec2>(), n) }
+}
+
+/// Writes the first `grains.len()` entries of `directions` (see [`principal_directions`]),
+/// with AVX where the processor has it.
+fn write_principal_directions(
+    grains: &[Grain],
+    levels: &[GrainLevel],
+    directions: &mut [MaybeUninit<DVec2>; GRAIN_CHUNK],
+) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         // SAFETY: the processor has AVX (tested just above).
-        unsafe { principal_directions_avx(grains, levels, directions) };
-        // SAFETY: the first `n` entries were written.
-        return unsafe { std::slice::from_raw_parts(directions.as_ptr().cast::<DVec2>(), n) };
+        return unsafe { principal_directions_avx(grains, levels, directions) };
     }
-    principal_directions_in_lanes(grains, levels, directions);
-    // SAFETY: the first `n` entries were written.
-    unsafe { std::slice::from_raw_parts(directions.as_ptr().cast::<DVec2>(), n) }
+    principal_directions_in_lanes(grains, levels, directions)
 }
 
 #[cfg(target_arch = "x86_64")]
