@@ -551,14 +551,12 @@ pub struct World {
     /// grains'. Anything else that changes the grains or their levels clears it (the density,
     /// the one parameter a frame reads, is fixed for the world's life).
     frames_current: bool,
-    /// Whether every frame is a circle (see [`Frame::circle`]), kept with the frames: then
-    /// the pair pass takes every block of pairs to the circle lanes without reading the two
-    /// frames' flags of each pair first (issue #16: 63 instructions a grain-step of rigid
-    /// discs under callgrind).
-    frames_all_circles: bool,
-    /// Whether no frame is a circle, kept with the frames: then the pair pass reads no frame's
-    /// flag to choose a pair's path (a world at the full level).
-    frames_no_circle: bool,
+    /// How many frames are circles (see [`Frame::circle`]), kept with the frames: when all
+    /// are, the pair pass takes every block of pairs to the circle lanes without reading the
+    /// two frames' flags of each pair first (issue #16: 63 instructions a grain-step of rigid
+    /// discs under callgrind); when none is (a world at the full level), it chooses each
+    /// pair's path without reading them either.
+    circle_frames: usize,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
     /// whether it touched in the last step,
@@ -625,6 +623,16 @@ impl BoxCarry {
 }
 
 impl World {
+    /// Whether every frame is a circle (see [`World::circle_frames`]).
+    fn frames_all_circles(&self) -> bool {
+        self.circle_frames == self.frames.len()
+    }
+
+    /// Whether no frame is a circle.
+    fn frames_no_circle(&self) -> bool {
+        self.circle_frames == 0
+    }
+
     pub fn new(params: Parameters, grains: Vec<Grain>, walls: Vec<Wall>) -> Self {
         assert!(walls.len() <= MAX_WALLS, "at most {MAX_WALLS} walls");
         let contours = Contours::new(params.resolution_deg);
@@ -648,8 +656,7 @@ impl World {
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
             frames_current: false,
-            frames_all_circles: false,
-            frames_no_circle: false,
+            circle_frames: 0,
             pair_state: Vec::new(),
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
@@ -858,8 +865,7 @@ impl World {
                     *center = frame.center;
                     *reach = frame.bounding_radius;
                 });
-            self.frames_all_circles = self.frames.par_iter().all(|frame| frame.circle);
-            self.frames_no_circle = !self.frames.par_iter().any(|frame| frame.circle);
+            self.circle_frames = self.frames.par_iter().filter(|frame| frame.circle).count();
             self.frames_current = true;
         }
         let frames_done = Instant::now();
@@ -950,8 +956,8 @@ impl World {
                 .periodic
                 .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
             only_fast: only_fast.then_some(self.fast.as_slice()),
-            every_frame_a_circle: self.frames_all_circles,
-            no_frame_a_circle: self.frames_no_circle,
+            every_frame_a_circle: self.frames_all_circles(),
+            no_frame_a_circle: self.frames_no_circle(),
         };
         let chunks = pair_chunks(
             &self.pair_chunk_ends,
@@ -1262,9 +1268,7 @@ impl World {
         // Every grain was updated and given its next frame, failed steps included (a grain's
         // failure is reported after the pass).
         self.frames_current = true;
-        let circle_frames: usize = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
-        self.frames_all_circles = circle_frames == self.frames.len();
-        self.frames_no_circle = circle_frames == 0;
+        self.circle_frames = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
 
         let mut ends = PassEnds::default();
         for sums in &chunk_sums {
@@ -1578,17 +1582,17 @@ mod tests {
             }
         }
         let all_circles = world.frames.iter().all(|frame| frame.circle);
-        if world.frames_all_circles != all_circles {
+        if world.frames_all_circles() != all_circles {
             return Err(format!(
                 "frames_all_circles is {}, every frame a circle: {all_circles}",
-                world.frames_all_circles
+                world.frames_all_circles()
             ));
         }
         let no_circle = !world.frames.iter().any(|frame| frame.circle);
-        if world.frames_no_circle != no_circle {
+        if world.frames_no_circle() != no_circle {
             return Err(format!(
                 "frames_no_circle is {}, no frame a circle: {no_circle}",
-                world.frames_no_circle
+                world.frames_no_circle()
             ));
         }
         Ok(())
@@ -1603,39 +1607,39 @@ mod tests {
         let mut world = crate::run::bench::dense_packing(100, 1.0);
         crate::run::bench::with_model(&mut world, ModelLevel::Rigid);
         world.step().unwrap();
-        assert!(world.frames_all_circles);
+        assert!(world.frames_all_circles());
         frames_match_grains(&world).unwrap();
         let mut levels = vec![GrainLevel::new(ModelLevel::Rigid); world.grains.len()];
         levels[37] = GrainLevel::new(ModelLevel::Full);
         world.set_levels(&levels);
         world.prepare(0.0).unwrap();
-        assert!(!world.frames_all_circles);
+        assert!(!world.frames_all_circles());
         for _ in 0..5 {
             world.step().unwrap();
-            assert!(!world.frames_all_circles);
+            assert!(!world.frames_all_circles());
             frames_match_grains(&world).unwrap();
         }
         levels[37] = GrainLevel::new(ModelLevel::Rigid);
         world.set_levels(&levels);
         world.grains_mut()[37].eps2 = world.grains()[37].eps1;
         world.step().unwrap();
-        assert!(world.frames_all_circles);
+        assert!(world.frames_all_circles());
         frames_match_grains(&world).unwrap();
         // And the flag that spares the pair pass the frames' flags: set once no frame is a
         // circle, cleared when one is again.
-        assert!(!world.frames_no_circle);
+        assert!(!world.frames_no_circle());
         let mut levels = vec![GrainLevel::new(ModelLevel::Full); world.grains.len()];
         world.set_levels(&levels);
         for _ in 0..3 {
             world.step().unwrap();
-            assert!(world.frames_no_circle && !world.frames_all_circles);
+            assert!(world.frames_no_circle() && !world.frames_all_circles());
             frames_match_grains(&world).unwrap();
         }
         levels[12] = GrainLevel::new(ModelLevel::Rigid);
         world.set_levels(&levels);
         world.grains_mut()[12].eps2 = world.grains()[12].eps1;
         world.step().unwrap();
-        assert!(!world.frames_no_circle);
+        assert!(!world.frames_no_circle());
         frames_match_grains(&world).unwrap();
     }
 
