@@ -342,19 +342,17 @@ impl NeighborList {
             let (cx, cy) = unpack(column_and_row[g]);
             cy * cols + cx
         });
+        // The grains in bin order, as in `build`: a row's neighbouring bins are one run of it
+        // unless they wrap round the cell.
+        let binned: Vec<BinnedGrain> = cell_grains
+            .iter()
+            .map(|&j| BinnedGrain {
+                center: centers[j as usize],
+                reach: reach[j as usize],
+                grain: j,
+            })
+            .collect();
         let skin = self.skin;
-        // The bin `delta` (-1, 0 or 1) from bin `k` of `count` round the cell: `rem_euclid`
-        // without its integer divisions (the cell's bin counts are not constants).
-        let wrap = |k: usize, delta: isize, count: usize| -> usize {
-            let next = k as isize + delta;
-            if next < 0 {
-                count - 1
-            } else if next as usize >= count {
-                0
-            } else {
-                next as usize
-            }
-        };
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
         // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
         let chunks: Vec<ChunkPairs> = (0..n.div_ceil(BUILD_CHUNK))
@@ -363,34 +361,26 @@ impl NeighborList {
                 let (mut pairs, mut images) = (Vec::new(), Vec::new());
                 let mut found: Vec<(u32, [i64; 2])> = Vec::new();
                 for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
-                    let ci = centers[i];
+                    let (ci, reach_i) = (centers[i], reach[i]);
                     let (cx, cy) = unpack(column_and_row[i]);
-                    let mut bins = [0; 9];
-                    for (k, bin) in bins.iter_mut().enumerate() {
-                        let (dx, dy) = (k as isize % 3 - 1, k as isize / 3 - 1);
-                        *bin = wrap(cy, dy, rows) * cols + wrap(cx, dx, cols);
-                    }
-                    // Fewer than 3 bins across: the same bin comes more than once, and is
-                    // visited once.
-                    let repeats = cols < 3 || rows < 3;
-                    if repeats {
-                        bins.sort_unstable();
-                    }
                     found.clear();
-                    for (b, &k) in bins.iter().enumerate() {
-                        if repeats && b > 0 && bins[b - 1] == k {
-                            continue;
-                        }
-                        for &j in &cell_grains[cell_start[k] as usize..cell_start[k + 1] as usize] {
-                            if (j as usize) <= i {
-                                continue;
-                            }
-                            // `d = x_j - x_i - H m`: the image of j nearest i is at `x_j - H m`.
-                            let (d, [m1, m2]) =
-                                cell.minimum_image_in_range(centers[j as usize] - ci);
-                            let limit = reach[i] + reach[j as usize] + skin;
-                            if d.length_squared() < limit * limit {
-                                found.push((j, [-m1, -m2]));
+                    let column_runs = NeighborBins::around(cx, cols);
+                    for ny in NeighborBins::around(cy, rows).runs().flatten() {
+                        for columns in column_runs.runs() {
+                            let run = cell_start[ny * cols + columns.start] as usize
+                                ..cell_start[ny * cols + columns.end] as usize;
+                            for other in &binned[run] {
+                                let j = other.grain;
+                                if (j as usize) <= i {
+                                    continue;
+                                }
+                                // `d = x_j - x_i - H m`: the image of j nearest i is at
+                                // `x_j - H m`.
+                                let (d, [m1, m2]) = cell.minimum_image_in_range(other.center - ci);
+                                let limit = reach_i + other.reach + skin;
+                                if d.length_squared() < limit * limit {
+                                    found.push((j, [-m1, -m2]));
+                                }
                             }
                         }
                     }
@@ -477,6 +467,33 @@ pub fn largest_reach(reach: &[f64]) -> f64 {
 
 /// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
 /// being `grains[start[k]..start[k + 1]]`, in increasing order.
+/// The bins next to bin `k` along one axis of a periodic cell's `count`, as runs of
+/// consecutive bins that hold each bin once: `k - 1`, `k` and `k + 1` round the cell, every bin
+/// where there are at most three.
+struct NeighborBins {
+    runs: [std::ops::Range<usize>; 2],
+    count: usize,
+}
+
+impl NeighborBins {
+    fn around(k: usize, count: usize) -> Self {
+        let (runs, count) = if count <= 3 {
+            ([0..count, 0..0], 1)
+        } else if k == 0 {
+            ([0..2, count - 1..count], 2)
+        } else if k == count - 1 {
+            ([0..1, k - 1..count], 2)
+        } else {
+            ([k - 1..k + 2, 0..0], 1)
+        };
+        NeighborBins { runs, count }
+    }
+
+    fn runs(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.runs.iter().take(self.count).cloned()
+    }
+}
+
 /// A grain as the box's search reads it from the bins.
 #[derive(Clone, Copy)]
 struct BinnedGrain {
@@ -609,6 +626,24 @@ mod tests {
             "{} builds in 400 steps",
             list.builds
         );
+    }
+
+    /// Expectation: the runs round bin k hold k - 1, k and k + 1 modulo the count, each once
+    /// (all the bins, each once, where there are at most three).
+    #[test]
+    fn the_neighbouring_bins_round_a_cell_are_each_visited_once() {
+        for count in 1..=7 {
+            for k in 0..count {
+                let mut visited: Vec<usize> =
+                    NeighborBins::around(k, count).runs().flatten().collect();
+                visited.sort_unstable();
+                let mut expected: Vec<usize> =
+                    [count - 1, 0, 1].iter().map(|d| (k + d) % count).collect();
+                expected.sort_unstable();
+                expected.dedup();
+                assert_eq!(visited, expected, "bin {k} of {count}");
+            }
+        }
     }
 
     /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
