@@ -295,15 +295,21 @@ impl GrainPass<'_> {
     #[inline(always)]
     fn pair_load<const FRICTIONAL: bool>(&self, g: usize, frame: &Frame) -> ContactLoad {
         let mut load = ContactLoad::default();
+        let (second_ends, first_ends) = self.neighbors.ends_of(g);
         // One loop over the second ends for each case of the cell, so that the loop does not
         // ask which case it is in at every pair.
         match &self.cell {
-            None => self.add_second_ends::<FRICTIONAL>(g, frame.center, |_| DVec2::ZERO, &mut load),
+            None => self.add_second_ends::<FRICTIONAL>(
+                second_ends,
+                frame.center,
+                |_| DVec2::ZERO,
+                &mut load,
+            ),
             Some(cell) => {
                 let images = &self.neighbors.images;
                 assert!(images.len() == self.neighbors.pairs.len());
                 self.add_second_ends::<FRICTIONAL>(
-                    g,
+                    second_ends,
                     frame.center,
                     // SAFETY: `add_second_ends` calls this with indices of the list's pairs
                     // only, and in a cell the list has an image for each pair (asserted
@@ -314,7 +320,7 @@ impl GrainPass<'_> {
             }
         }
         // The first ends are a run of the list: one bounds check for the run.
-        let run = self.neighbors.first_ends_of(g);
+        let run = first_ends;
         let active = &self.pair_active[run.clone()];
         let contacts = &self.pair_contacts[run];
         for (&active, c) in active.iter().zip(contacts) {
@@ -331,12 +337,13 @@ impl GrainPass<'_> {
         load
     }
 
-    /// Adds to `load` the forces of the pairs `[i, g]` on their second grain g, centred at
-    /// `center`; `image(pair)`: the shift of the image of g that met the pair's first grain.
+    /// Adds to `load` the forces of the pairs `second_ends` (the pairs `[i, g]`) on their second
+    /// grain g, centred at `center`; `image(pair)`: the shift of the image of g that met the
+    /// pair's first grain.
     #[inline(always)]
     fn add_second_ends<const FRICTIONAL: bool>(
         &self,
-        g: usize,
+        second_ends: &[u32],
         center: DVec2,
         image: impl Fn(usize) -> DVec2,
         load: &mut ContactLoad,
@@ -345,7 +352,7 @@ impl GrainPass<'_> {
         // The list's ends index its pairs, and the pair pass's records have one entry a pair.
         let pairs = self.neighbors.pairs.len();
         assert!(pair_active.len() == pairs && pair_contacts.len() == pairs);
-        for &pair in self.neighbors.second_ends_of(g) {
+        for &pair in second_ends {
             let pair = pair as usize;
             debug_assert!(pair < pairs);
             // SAFETY: `pair` is an entry of the list's index of second ends, which holds
