@@ -119,12 +119,18 @@ impl PeriodicCell {
     #[inline]
     pub fn wrap(&self, x: DVec2) -> (DVec2, [i64; 2]) {
         let s = self.reduced(x);
+        // Inside the cell, off its lower sides and off the axes (nearly every grain, every
+        // step): the image is `x` itself, bit for bit, as below (`x - H (+0, +0)` is `x` for
+        // any `x` that is not a zero).
+        if s.x > 0.0 && s.x < 1.0 && s.y > 0.0 && s.y < 1.0 && x.x != 0.0 && x.y != 0.0 {
+            return (x, [0, 0]);
+        }
         let n = DVec2::new(floor_in_cell(s.x), floor_in_cell(s.y));
         let wrapped = x - self.matrix * n;
         if n.x == 0.0 && n.y == 0.0 {
-            // Inside the cell (nearly every grain, every step): `wrapped` is `x` but for the
-            // sign of a zero, its reduced coordinates are `s`'s, in [0, 1), and the fix of
-            // `shifted` would add nothing.
+            // Inside the cell, on a lower side or an axis: `wrapped` is `x` but for the sign of
+            // a zero, its reduced coordinates are `s`'s, in [0, 1), and the fix of `shifted`
+            // would add nothing.
             return (wrapped, [0, 0]);
         }
         self.shifted(wrapped, n)
@@ -374,9 +380,9 @@ mod tests {
     fn wrap_inside_the_cell_gives_the_full_formula_to_the_bit() {
         // Expectation: the shortcut for a point inside the cell returns the bits of the full
         // wrap (the floor's shift, then the second reduction and fix of `shifted`, for every
-        // point), on zeros of either sign, the origin, a point just inside the far side and
-        // points inside and outside, in a sheared cell with negative entries as in a
-        // rectangle.
+        // point), on zeros of either sign, points on the axes, the origin, a point just inside
+        // the far side and points inside and outside, in a sheared cell with negative entries as
+        // in a rectangle.
         let full = |cell: &PeriodicCell, x: DVec2| {
             let s = cell.reduced(x);
             let n = DVec2::new(s.x.floor(), s.y.floor());
@@ -388,6 +394,14 @@ mod tests {
                 DVec2::new(-0.3, 0.2),
                 DVec2::new(1.7, -0.4),
                 DVec2::new(-0.6, 1.2),
+            )
+            .unwrap(),
+            // Both entries of each row negative: `H (+0, +0)` is (-0, -0), which changes the
+            // sign of a point's zero coordinate.
+            PeriodicCell::new(
+                DVec2::new(0.8, 1.2),
+                DVec2::new(-1.0, -1.0),
+                DVec2::new(-0.5, -1.5),
             )
             .unwrap(),
         ];
@@ -407,6 +421,13 @@ mod tests {
             ];
             for _ in 0..20_000 {
                 points.push(cell.position(DVec2::new(3.0 * next() - 1.0, 3.0 * next() - 1.0)));
+            }
+            // Points on the axes, inside the cell or not: zeros of either sign.
+            for _ in 0..2_000 {
+                let p = cell.position(DVec2::new(next(), next()));
+                for zero in [0.0, -0.0] {
+                    points.extend([DVec2::new(zero, p.y), DVec2::new(p.x, zero)]);
+                }
             }
             for x in points {
                 let (got, image) = cell.wrap(x);
