@@ -230,14 +230,7 @@ impl NeighborList {
         // consecutive, so that a grain's three neighbouring bins in a row are one run of it,
         // read in order (a third of the loops over bins, and no reads scattered over the
         // grains' arrays).
-        let binned: Vec<BinnedGrain> = cell_grains
-            .iter()
-            .map(|&j| BinnedGrain {
-                center: centers[j as usize],
-                reach: reach[j as usize],
-                grain: j,
-            })
-            .collect();
+        let binned = BinnedGrain::in_order(&cell_grains, centers, reach);
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order: two allocations a chunk, not one
         // a grain (they were a tenth of a build).
@@ -344,14 +337,7 @@ impl NeighborList {
         });
         // The grains in bin order, as in `build`: a row's neighbouring bins are one run of it
         // unless they wrap round the cell.
-        let binned: Vec<BinnedGrain> = cell_grains
-            .iter()
-            .map(|&j| BinnedGrain {
-                center: centers[j as usize],
-                reach: reach[j as usize],
-                grain: j,
-            })
-            .collect();
+        let binned = BinnedGrain::in_order(&cell_grains, centers, reach);
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
         // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
@@ -515,12 +501,26 @@ impl NeighborBins {
     }
 }
 
-/// A grain as the box's search reads it from the bins.
+/// A grain as the searches read it from the bins.
 #[derive(Clone, Copy)]
 struct BinnedGrain {
     center: DVec2,
     reach: f64,
     grain: u32,
+}
+
+impl BinnedGrain {
+    /// The grains `order` (the bins' grains, bin after bin), each with its centre and reach.
+    fn in_order(order: &[u32], centers: &[DVec2], reach: &[f64]) -> Vec<BinnedGrain> {
+        order
+            .iter()
+            .map(|&j| BinnedGrain {
+                center: centers[j as usize],
+                reach: reach[j as usize],
+                grain: j,
+            })
+            .collect()
+    }
 }
 
 fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Vec<u32>, Vec<u32>) {
