@@ -45,6 +45,7 @@ use glam::{DMat2, DVec2};
 use grain_pass::{CycleHalf, GrainChunk, GrainPass};
 use parameters::MULTI_RATE_MIN_RIGID_SHARE;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::time::Instant;
 
 /// Grains per chunk of the parallel passes: fixed, so that every reduction is the same sum in
@@ -448,6 +449,35 @@ impl std::fmt::Display for PhaseTimes {
             )?;
         }
         Ok(())
+    }
+}
+
+/// Writes into `states` the state of each of `pairs` (a run of a new neighbour list) that
+/// `old_pairs` also held, from `old_states`, and the default state of each new pair. Both lists
+/// are sorted by (i, j), compared as `i << 32 | j` in one comparison.
+fn carry_pair_states(
+    old_pairs: &[[u32; 2]],
+    old_states: &[PairState],
+    pairs: &[[u32; 2]],
+    states: &mut [MaybeUninit<PairState>],
+) {
+    assert!(old_states.len() == old_pairs.len() && states.len() == pairs.len());
+    let key = |&[i, j]: &[u32; 2]| u64::from(i) << 32 | u64::from(j);
+    let Some(first) = pairs.first() else {
+        return;
+    };
+    let first = key(first);
+    let mut k = old_pairs.partition_point(|old| key(old) < first);
+    for (pair, state) in pairs.iter().zip(states) {
+        let pair = key(pair);
+        while k < old_pairs.len() && key(&old_pairs[k]) < pair {
+            k += 1;
+        }
+        state.write(if k < old_pairs.len() && key(&old_pairs[k]) == pair {
+            old_states[k]
+        } else {
+            PairState::default()
+        });
     }
 }
 
@@ -901,34 +931,20 @@ impl World {
             }
             // Pair indices change with the list: carry each surviving pair's state over.
             // Both lists are sorted by (i, j), so the new list merges with the old one: each
-            // parallel task keeps its place in the old list from one pair to the next (its
-            // pairs come in increasing order) and finds it by bisection at its first pair, or
-            // whenever the order breaks. The states are written in place, in parallel: a
-            // vector filled with defaults first was a serial pass over every pair.
+            // parallel task finds its first pair by bisection, then walks both lists in step.
+            // The states are written in place, in parallel: a vector filled with defaults
+            // first was a serial pass over every pair.
             let pairs = &self.neighbors.pairs;
-            let mut state = Vec::new();
-            pairs
-                .par_iter()
-                .with_min_len(PAIR_CHUNK)
-                .map_init(
-                    || None::<([u32; 2], usize)>,
-                    |place, pair| {
-                        let mut k = match *place {
-                            Some((last, k)) if last <= *pair => k,
-                            _ => old_pairs.partition_point(|old| old < pair),
-                        };
-                        while k < old_pairs.len() && old_pairs[k] < *pair {
-                            k += 1;
-                        }
-                        *place = Some((*pair, k));
-                        if k < old_pairs.len() && old_pairs[k] == *pair {
-                            old_state[k]
-                        } else {
-                            PairState::default()
-                        }
-                    },
-                )
-                .collect_into_vec(&mut state);
+            let mut state: Vec<PairState> = Vec::with_capacity(pairs.len());
+            state.spare_capacity_mut()[..pairs.len()]
+                .par_chunks_mut(PAIR_CHUNK)
+                .zip(pairs.par_chunks(PAIR_CHUNK))
+                .for_each(|(states, pairs)| {
+                    carry_pair_states(&old_pairs, &old_state, pairs, states)
+                });
+            // SAFETY: the tasks above wrote each of the first `pairs.len()` entries, one for
+            // each new pair.
+            unsafe { state.set_len(pairs.len()) };
             self.pair_state = state;
             // The pair pass writes every flag, and a record wherever a flag is set, before
             // anything reads them.
@@ -1488,6 +1504,61 @@ fn prefetch<T>(value: &T) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rebuilt_list_carries_the_state_of_each_pair_it_kept_and_only_those() {
+        // Expectation: each pair of the new list has the state the old list held for the same
+        // (i, j), and the default state where the old list had no such pair, whatever runs the
+        // new list is cut into (pairs that share i and differ in j, and the reverse, included).
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = |bound: u32| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % u64::from(bound)) as u32
+        };
+        let mut list = |count: usize| {
+            let mut pairs: Vec<[u32; 2]> = (0..count)
+                .map(|_| {
+                    let i = next(60);
+                    [i, i + 1 + next(8)]
+                })
+                .collect();
+            pairs.sort_unstable();
+            pairs.dedup();
+            pairs
+        };
+        let old_pairs = list(300);
+        let new_pairs = list(300);
+        let old_states: Vec<PairState> = (0..old_pairs.len())
+            .map(|k| PairState {
+                tangential_history: k as f64 + 1.0,
+                contact_length: 0.5 * k as f64,
+                ..Default::default()
+            })
+            .collect();
+        let kept = new_pairs.iter().filter(|p| old_pairs.contains(p)).count();
+        assert!(
+            kept > 20 && kept < new_pairs.len() - 20,
+            "{kept} of {}",
+            new_pairs.len()
+        );
+        for run in [1, 7, 64, new_pairs.len()] {
+            let mut states = vec![MaybeUninit::<PairState>::uninit(); new_pairs.len()];
+            for (pairs, states) in new_pairs.chunks(run).zip(states.chunks_mut(run)) {
+                carry_pair_states(&old_pairs, &old_states, pairs, states);
+            }
+            for (pair, state) in new_pairs.iter().zip(&states) {
+                // SAFETY: every entry was written by one of the runs above.
+                let state = unsafe { state.assume_init() };
+                let want = match old_pairs.iter().position(|old| old == pair) {
+                    Some(k) => old_states[k],
+                    None => PairState::default(),
+                };
+                assert_eq!(state, want, "{pair:?}, runs of {run}");
+            }
+        }
+    }
 
     #[test]
     fn the_carry_inside_the_step_is_the_remap_after_it_bit_for_bit() {
