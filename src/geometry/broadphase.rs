@@ -472,8 +472,6 @@ pub fn largest_reach(reach: &[f64]) -> f64 {
         .reduce(|| 0.0, f64::max)
 }
 
-/// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
-/// being `grains[start[k]..start[k + 1]]`, in increasing order.
 /// The bins next to bin `k` along one axis of a periodic cell's `count`, as runs of
 /// consecutive bins that hold each bin once: `k - 1`, `k` and `k + 1` round the cell, every bin
 /// where there are at most three.
@@ -523,6 +521,8 @@ impl BinnedGrain {
     }
 }
 
+/// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
+/// being `grains[start[k]..start[k + 1]]`, in increasing order.
 fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; bins + 1];
     for g in 0..n {

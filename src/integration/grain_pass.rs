@@ -320,9 +320,8 @@ impl GrainPass<'_> {
             }
         }
         // The first ends are a run of the list: one bounds check for the run.
-        let run = first_ends;
-        let active = &self.pair_active[run.clone()];
-        let contacts = &self.pair_contacts[run];
+        let active = &self.pair_active[first_ends.clone()];
+        let contacts = &self.pair_contacts[first_ends];
         for (&active, c) in active.iter().zip(contacts) {
             if !active {
                 continue;
