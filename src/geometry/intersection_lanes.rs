@@ -101,6 +101,22 @@ pub struct BlockContacts {
 }
 
 impl BlockContacts {
+    /// The lanes' contact points and normals (by coordinate), lengths and normal gaps, as the
+    /// kernel left them: a lane's are its contact's where it is on the path, and are otherwise
+    /// not to be read.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    pub fn contact_lanes(
+        &self,
+    ) -> (
+        &[[f64; BLOCK]; 2],
+        &[[f64; BLOCK]; 2],
+        &[f64; BLOCK],
+        &[f64; BLOCK],
+    ) {
+        (&self.point, &self.normal, &self.length, &self.normal_gap)
+    }
+
     /// Lane `l`'s contact and next hint, `None` off the path.
     #[inline(always)]
     pub fn lane(&self, l: usize) -> LaneContact {
