@@ -221,15 +221,20 @@ impl<'a> PairPass<'a> {
             })
     }
 
-    /// Pair `p`'s two shapes, read in place, the shift to the image of the second that meets
-    /// the first, and its hint.
+    /// Pair `p`'s two frames.
     #[inline(always)]
-    fn lane_pair(&self, p: usize, hint: PairHint) -> LanePair<'a> {
-        let [i, j] = self.pairs[p];
+    fn frames_of(&self, p: usize) -> [&'a Frame; 2] {
         let frames = self.frames;
+        self.pairs[p].map(|g| &frames[g as usize])
+    }
+
+    /// Pair `p`'s two shapes (of its frames `ends`), read in place, the shift to the image of
+    /// the second that meets the first, and its hint.
+    #[inline(always)]
+    fn lane_pair(&self, p: usize, ends: [&'a Frame; 2], hint: PairHint) -> LanePair<'a> {
         LanePair {
-            i: frames[i as usize].lane_shape(),
-            j: frames[j as usize].lane_shape(),
+            i: ends[0].lane_shape(),
+            j: ends[1].lane_shape(),
             j_shift: match &self.periodic {
                 Some((cell, _)) => cell.image_shift(self.images[p]),
                 None => DVec2::ZERO,
@@ -592,8 +597,10 @@ struct PolygonsAhead<'a> {
     table: Option<&'a ContourTable>,
     /// The block's pairs (chunk indices, increasing) and their results; `taken` of them used.
     pairs: [usize; BLOCK],
-    /// The block's shapes and hints, kept from block to block (only their filling changes).
+    /// The block's shapes and hints, kept from block to block (only their filling changes),
+    /// and its pairs' frames.
     block: [LanePair<'a>; BLOCK],
+    ends: [[&'a Frame; 2]; BLOCK],
     results: BlockContacts,
     /// The block's pairs as their normal forces read them, and those forces.
     input: PolygonPairs,
@@ -615,6 +622,7 @@ impl<'a> PolygonsAhead<'a> {
             },
             pairs: [0; BLOCK],
             block: [LanePair::default(); BLOCK],
+            ends: [[&SPARE_FRAME; 2]; BLOCK],
             results: BlockContacts::default(),
             input: PolygonPairs::default(),
             forces: PolygonPairForces::default(),
@@ -648,16 +656,21 @@ impl<'a> PolygonsAhead<'a> {
         if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
             return None;
         }
-        let block = &mut self.block;
-        block[0] = pass.lane_pair(first_pair + k, states[k].hint);
+        let (block, ends) = (&mut self.block, &mut self.ends);
+        let mut pairs = [first_pair + k; BLOCK];
+        ends[0] = pass.frames_of(pairs[0]);
+        block[0] = pass.lane_pair(pairs[0], ends[0], states[k].hint);
         self.pairs[0] = k;
         let mut filled = 1;
         let window = &states[k + 1..(k + POLYGON_WINDOW).min(states.len())];
         for (ahead, state) in (k + 1..).zip(window) {
             let hint = state.hint;
-            if pass.on_polygon_path(first_pair + ahead, &hint) {
-                block[filled] = pass.lane_pair(first_pair + ahead, hint);
+            let p = first_pair + ahead;
+            if pass.on_polygon_path(p, &hint) {
+                ends[filled] = pass.frames_of(p);
+                block[filled] = pass.lane_pair(p, ends[filled], hint);
                 self.pairs[filled] = ahead;
+                pairs[filled] = p;
                 filled += 1;
                 if filled == BLOCK {
                     break;
@@ -667,32 +680,39 @@ impl<'a> PolygonsAhead<'a> {
         // Spare lanes repeat the first pair; their results are not used.
         for lane in filled..BLOCK {
             block[lane] = block[0];
+            ends[lane] = ends[0];
         }
         grain_grain_block(table, block, pass.periodic.is_some(), &mut self.results);
-        // Spare lanes repeat the first pair here too.
-        let mut pairs = [first_pair + self.pairs[0]; BLOCK];
-        for lane in 1..filled {
-            pairs[lane] = first_pair + self.pairs[lane];
+        // SAFETY: a block is computed only where the processor has AVX (`table` is set only
+        // there: `new`).
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            self.input.set_pairs_avx(pass, &pairs, ends);
+            polygon_pair_forces_avx(
+                &self.results,
+                &self.input,
+                &pass.params.law,
+                pass.params.contact_damping,
+                &mut self.forces,
+            );
         }
-        let frames = pass.frames;
-        let mut ends = [[&frames[0]; 2]; BLOCK];
-        for (end, &p) in ends.iter_mut().zip(&pairs) {
-            let [i, j] = pass.pairs[p];
-            *end = [&frames[i as usize], &frames[j as usize]];
-        }
-        self.input.set_pairs(pass, &pairs, &ends);
-        polygon_pair_forces_dispatch(
-            &self.results,
-            &self.input,
-            &pass.params.law,
-            pass.params.contact_damping,
-            &mut self.forces,
-        );
         self.filled = filled;
         self.taken = 1;
         Some(0)
     }
 }
+
+/// What a polygon block's lanes hold before it is first filled.
+static SPARE_FRAME: Frame = Frame {
+    center: DVec2::ZERO,
+    bounding_radius: 0.0,
+    mass: 0.0,
+    velocity: DVec2::ZERO,
+    omega: 0.0,
+    circle: false,
+    map: DMat2::ZERO,
+    velocity_gradient: DMat2::ZERO,
+};
 
 /// The lanes of a block of polygon pairs.
 type BlockLanes = Lanes<BLOCK>;
@@ -708,41 +728,9 @@ struct PolygonEnds {
 }
 
 impl PolygonEnds {
-    /// The lanes set to the grains of `frames` (not circles), each at its own centre.
-    #[inline(always)]
-    fn set(&mut self, frames: [&Frame; BLOCK]) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor has AVX (tested just above).
-            unsafe { self.set_avx(frames) };
-            return;
-        }
-        let ends = self;
-        for (lane, frame) in frames.into_iter().enumerate() {
-            let gradient = &frame.velocity_gradient;
-            let [x, y] = &mut ends.center;
-            let [vx, vy] = &mut ends.velocity;
-            let [[lxx, lxy], [lyx, lyy]] = &mut ends.velocity_gradient;
-            let values = [
-                (x, frame.center.x),
-                (y, frame.center.y),
-                (vx, frame.velocity.x),
-                (vy, frame.velocity.y),
-                (lxx, gradient.x_axis.x),
-                (lxy, gradient.x_axis.y),
-                (lyx, gradient.y_axis.x),
-                (lyy, gradient.y_axis.y),
-                (&mut ends.mass, frame.mass),
-            ];
-            for (lanes, value) in values {
-                lanes.0[lane] = value;
-            }
-        }
-    }
-
-    /// [`set`](Self::set) with AVX: the four frames' (centre, radius, mass) and velocity
-    /// gradients loaded as four vectors each and transposed, their velocities as two-lane
-    /// vectors interleaved (the same values).
+    /// The lanes set to the grains of `frames` (not circles), each at its own centre: the
+    /// four frames' (centre, radius, mass) and velocity gradients loaded as four vectors each
+    /// and transposed, their velocities as two-lane vectors interleaved.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn set_avx(&mut self, frames: [&Frame; BLOCK]) {
@@ -822,17 +810,18 @@ struct PolygonPairs {
 
 impl PolygonPairs {
     /// The lanes set to the pairs `pairs` of `pass`, whose grains' frames are `ends`.
-    #[inline(always)]
-    fn set_pairs(
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn set_pairs_avx(
         &mut self,
         pass: &PairPass<'_>,
         pairs: &[usize; BLOCK],
         ends: &[[&Frame; 2]; BLOCK],
     ) {
         self.first
-            .set([ends[0][0], ends[1][0], ends[2][0], ends[3][0]]);
+            .set_avx([ends[0][0], ends[1][0], ends[2][0], ends[3][0]]);
         self.second
-            .set([ends[0][1], ends[1][1], ends[2][1], ends[3][1]]);
+            .set_avx([ends[0][1], ends[1][1], ends[2][1], ends[3][1]]);
         if pass.periodic.is_none() {
             return;
         }
@@ -869,6 +858,7 @@ struct PolygonPairForces {
 /// relative velocity at the contact point and [`damped_normal_force`]. Lanes off the path or
 /// out of the domain compute values nobody reads.
 #[inline(always)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn polygon_pair_forces(
     contacts: &BlockContacts,
     pairs: &PolygonPairs,
@@ -907,25 +897,8 @@ fn polygon_pair_forces(
     out.effective_mass = effective_mass;
 }
 
-/// [`polygon_pair_forces`] with AVX where the processor has it (as the polygon blocks
-/// themselves: the same bits either way).
-#[inline(always)]
-fn polygon_pair_forces_dispatch(
-    contacts: &BlockContacts,
-    pairs: &PolygonPairs,
-    law: &SecantLaw,
-    damping_ratio: f64,
-    out: &mut PolygonPairForces,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX (tested just above).
-        unsafe { polygon_pair_forces_avx(contacts, pairs, law, damping_ratio, out) };
-        return;
-    }
-    polygon_pair_forces(contacts, pairs, law, damping_ratio, out);
-}
-
+/// [`polygon_pair_forces`] compiled for AVX (the blocks' lanes run only where the processor
+/// has it).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 fn polygon_pair_forces_avx(
