@@ -657,9 +657,10 @@ impl<'a> PolygonsAhead<'a> {
             return None;
         }
         let (block, ends) = (&mut self.block, &mut self.ends);
-        let mut pairs = [first_pair + k; BLOCK];
-        ends[0] = pass.frames_of(pairs[0]);
-        block[0] = pass.lane_pair(pairs[0], ends[0], states[k].hint);
+        // The block's pairs as the list numbers them (the chunk's are `self.pairs`).
+        let mut list_pairs = [first_pair + k; BLOCK];
+        ends[0] = pass.frames_of(list_pairs[0]);
+        block[0] = pass.lane_pair(list_pairs[0], ends[0], states[k].hint);
         self.pairs[0] = k;
         let mut filled = 1;
         let window = &states[k + 1..(k + POLYGON_WINDOW).min(states.len())];
@@ -670,7 +671,7 @@ impl<'a> PolygonsAhead<'a> {
                 ends[filled] = pass.frames_of(p);
                 block[filled] = pass.lane_pair(p, ends[filled], hint);
                 self.pairs[filled] = ahead;
-                pairs[filled] = p;
+                list_pairs[filled] = p;
                 filled += 1;
                 if filled == BLOCK {
                     break;
@@ -687,7 +688,7 @@ impl<'a> PolygonsAhead<'a> {
         // there: `new`).
         #[cfg(target_arch = "x86_64")]
         unsafe {
-            self.input.set_pairs_avx(pass, &pairs, ends);
+            self.input.set_pairs_avx(pass, &list_pairs, ends);
             polygon_pair_forces_avx(
                 &self.results,
                 &self.input,
