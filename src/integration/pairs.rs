@@ -361,11 +361,8 @@ impl<'a> PairPass<'a> {
     #[inline(never)]
     fn one_pair_left_by_block<const FRICTIONAL: bool>(
         &self,
-        p: usize,
-        computed: LaneContact,
-        state: &mut PairState,
-        active: &mut bool,
-        record: &mut PairContact,
+        (p, computed): (usize, LaneContact),
+        (state, active, record): (&mut PairState, &mut bool, &mut PairContact),
         sums: &mut PairSums,
     ) {
         self.one_pair::<FRICTIONAL>(p, computed, state, active, record, sums);
@@ -388,14 +385,15 @@ impl<'a> PairPass<'a> {
         sums: &mut PairSums,
     ) {
         let Some((geometry, hint)) = polygons.results.lane(lane) else {
-            self.one_pair_left_by_block::<FRICTIONAL>(p, None, state, active, record, sums);
+            self.one_pair_left_by_block::<FRICTIONAL>((p, None), (state, active, record), sums);
             return;
         };
         let forces = &polygons.forces;
         let at = |v: &BlockLanes| v.0[lane];
         if !SecantLaw::in_domain(at(&forces.denominator), at(&forces.floor)) {
             let computed = Some((geometry, hint));
-            self.one_pair_left_by_block::<FRICTIONAL>(p, computed, state, active, record, sums);
+            let slots = (state, active, record);
+            self.one_pair_left_by_block::<FRICTIONAL>((p, computed), slots, sums);
             return;
         }
         let pair = |v: &[BlockLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
@@ -566,7 +564,7 @@ impl<'a> PairPass<'a> {
             let pair = |v: &[PairLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
             records[lane] = PairContact {
                 normal: pair(&out.normal),
-                force: at(&out.force),
+                force: at(&out.response.force),
                 tangential_force: frictionless.force,
                 point: pair(&out.point),
                 cap_area_first: at(&out.cap_area[0]),
@@ -840,17 +838,62 @@ impl PolygonPairs {
     }
 }
 
-/// The normal response of a polygon block's contacts, lane by lane: the law's denominator and
-/// its floor (the lane is in the law's domain where [`SecantLaw::in_domain`] says so), and the
+/// The normal response of lanes of contacts ([`lane_response`]): the law's denominator and its
+/// floor (a lane is in the law's domain where [`SecantLaw::in_domain`] says so), and the
 /// quantities of a [`Touch`] in that case.
 #[derive(Debug, Clone, Copy, Default)]
-struct PolygonPairForces {
-    denominator: BlockLanes,
-    floor: BlockLanes,
-    stiffness: BlockLanes,
-    force: BlockLanes,
-    relative_velocity: [BlockLanes; 2],
-    effective_mass: BlockLanes,
+pub struct LaneResponse<T> {
+    pub denominator: T,
+    pub floor: T,
+    pub stiffness: T,
+    pub force: T,
+    pub relative_velocity: [T; 2],
+    pub effective_mass: T,
+}
+
+/// The normal response of a polygon block's contacts.
+type PolygonPairForces = LaneResponse<BlockLanes>;
+
+/// The normal response of lanes of contacts of length `length` and normal gap `normal_gap`
+/// along `normal`, whose grains' material points at the contact move at `velocity` (first,
+/// second grain; the affine field adds `affine_rate`, zero outside a periodic cell): the law's
+/// denominator and floor ([`SecantLaw::response`] is in its domain where
+/// [`SecantLaw::in_domain`] says so), its stiffness, and the one-pair path's relative velocity,
+/// effective mass and [`damped_normal_force`], in its order.
+#[inline(always)]
+fn lane_response<T: Real>(
+    law: &SecantLaw,
+    damping_ratio: f64,
+    ((length, normal_gap), normal): ((T, T), &[T; 2]),
+    [velocity_i, velocity_j]: [[T; 2]; 2],
+    affine_rate: &[T; 2],
+    [mass_i, mass_j]: [T; 2],
+    out: &mut LaneResponse<T>,
+) {
+    let (denominator, floor) = law.denominator(length, normal_gap);
+    let stiffness = law.stiffness(length, denominator);
+    let elastic = stiffness * normal_gap;
+    let relative_velocity = [
+        velocity_j[0] - velocity_i[0] + affine_rate[0],
+        velocity_j[1] - velocity_i[1] + affine_rate[1],
+    ];
+    let gap_rate = relative_velocity[0] * normal[0] + relative_velocity[1] * normal[1];
+    let effective_mass = mass_i * mass_j / (mass_i + mass_j);
+    let force = damped_normal_force(
+        elastic,
+        stiffness,
+        effective_mass,
+        T::splat(damping_ratio),
+        gap_rate,
+    );
+    *out = LaneResponse {
+        denominator,
+        floor,
+        stiffness,
+        force,
+        relative_velocity,
+        effective_mass,
+    };
 }
 
 /// The normal forces of a block of polygon contacts `contacts` between the grains `first` and
@@ -872,30 +915,18 @@ fn polygon_pair_forces(
     let point = [Lanes(point[0]), Lanes(point[1])];
     let normal = [Lanes(normal[0]), Lanes(normal[1])];
     let (length, normal_gap) = (Lanes(*length), Lanes(*normal_gap));
-    let (denominator, floor) = law.denominator(length, normal_gap);
-    let stiffness = law.stiffness(length, denominator);
-    let elastic = stiffness * normal_gap;
-    let velocity_j = second.velocity_at(&point);
-    let velocity_i = first.velocity_at(&point);
-    let relative_velocity = [
-        velocity_j[0] - velocity_i[0] + affine_rate[0],
-        velocity_j[1] - velocity_i[1] + affine_rate[1],
-    ];
-    let gap_rate = relative_velocity[0] * normal[0] + relative_velocity[1] * normal[1];
-    let (mass_i, mass_j) = (first.mass, second.mass);
-    let effective_mass = mass_i * mass_j / (mass_i + mass_j);
-    out.force = damped_normal_force(
-        elastic,
-        stiffness,
-        effective_mass,
-        BlockLanes::splat(damping_ratio),
-        gap_rate,
+    let velocity = [first.velocity_at(&point), second.velocity_at(&point)];
+    let masses = [first.mass, second.mass];
+    let contact = ((length, normal_gap), &normal);
+    lane_response(
+        law,
+        damping_ratio,
+        contact,
+        velocity,
+        affine_rate,
+        masses,
+        out,
     );
-    out.denominator = denominator;
-    out.floor = floor;
-    out.stiffness = stiffness;
-    out.relative_velocity = relative_velocity;
-    out.effective_mass = effective_mass;
 }
 
 /// [`polygon_pair_forces`] compiled for AVX (the blocks' lanes run only where the processor
@@ -1139,12 +1170,8 @@ pub struct DiscPairForces<T> {
     pub point: [T; 2],
     pub cap_area: [T; 2],
     pub normal_gap: T,
-    pub denominator: T,
-    pub floor: T,
-    pub stiffness: T,
-    pub force: T,
-    pub relative_velocity: [T; 2],
-    pub effective_mass: T,
+    /// The normal response.
+    pub response: LaneResponse<T>,
 }
 
 /// What one lane of [`DiscPairForces`] is.
@@ -1178,11 +1205,11 @@ impl DiscPairForces<PairLanes> {
                 cap_area_j: at(&self.cap_area[1]),
                 normal_gap: at(&self.normal_gap),
             },
-            stiffness: at(&self.stiffness),
+            stiffness: at(&self.response.stiffness),
             capped: false,
-            force: at(&self.force),
-            relative_velocity: pair(&self.relative_velocity),
-            effective_mass: at(&self.effective_mass),
+            force: at(&self.response.force),
+            relative_velocity: pair(&self.response.relative_velocity),
+            effective_mass: at(&self.response.effective_mass),
         })
     }
 
@@ -1196,7 +1223,7 @@ impl DiscPairForces<PairLanes> {
             & !degenerate_chord(at(&self.half_chord), at(&self.reach))
             & shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
             & shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
-            & SecantLaw::in_domain(at(&self.denominator), at(&self.floor))
+            & SecantLaw::in_domain(at(&self.response.denominator), at(&self.response.floor))
     }
 
     /// Which lanes are contacts, when [`lane`](Self::lane) is apart or a contact for every
@@ -1269,9 +1296,6 @@ pub fn disc_pair_forces<T: Real>(
     ];
     let length = T::splat(2.0) * half_chord;
     let normal_gap = T::splat(-0.5) * chord.overlap;
-    let (denominator, floor) = law.denominator(length, normal_gap);
-    let stiffness = law.stiffness(length, denominator);
-    let elastic = stiffness * normal_gap;
     let velocity_j = circle_velocity_at(
         input.second.velocity,
         input.second.omega,
@@ -1282,19 +1306,18 @@ pub fn disc_pair_forces<T: Real>(
         input.first.omega,
         [point[0] - ci[0], point[1] - ci[1]],
     );
-    let relative_velocity = [
-        velocity_j[0] - velocity_i[0] + input.affine_rate[0],
-        velocity_j[1] - velocity_i[1] + input.affine_rate[1],
-    ];
-    let gap_rate = relative_velocity[0] * normal[0] + relative_velocity[1] * normal[1];
-    let (mass_i, mass_j) = (input.first.mass, input.second.mass);
-    let effective_mass = mass_i * mass_j / (mass_i + mass_j);
-    let force = damped_normal_force(
-        elastic,
-        stiffness,
-        effective_mass,
-        T::splat(damping_ratio),
-        gap_rate,
+    let contact = ((length, normal_gap), &normal);
+    let masses = [input.first.mass, input.second.mass];
+    let velocity = [velocity_i, velocity_j];
+    let response = &mut out.response;
+    lane_response(
+        law,
+        damping_ratio,
+        contact,
+        velocity,
+        &input.affine_rate,
+        masses,
+        response,
     );
     out.distance_squared = distance_squared;
     out.reach = reach;
@@ -1306,12 +1329,6 @@ pub fn disc_pair_forces<T: Real>(
     out.point = point;
     out.cap_area = cap_area;
     out.normal_gap = normal_gap;
-    out.denominator = denominator;
-    out.floor = floor;
-    out.stiffness = stiffness;
-    out.force = force;
-    out.relative_velocity = relative_velocity;
-    out.effective_mass = effective_mass;
 }
 
 /// [`disc_pair_forces`] on the lanes, with AVX where the processor has it (chosen at run time:
