@@ -361,8 +361,11 @@ impl<'a> PairPass<'a> {
     #[inline(never)]
     fn one_pair_left_by_block<const FRICTIONAL: bool>(
         &self,
-        (p, computed): (usize, LaneContact),
-        (state, active, record): (&mut PairState, &mut bool, &mut PairContact),
+        p: usize,
+        computed: LaneContact,
+        state: &mut PairState,
+        active: &mut bool,
+        record: &mut PairContact,
         sums: &mut PairSums,
     ) {
         self.one_pair::<FRICTIONAL>(p, computed, state, active, record, sums);
@@ -385,15 +388,14 @@ impl<'a> PairPass<'a> {
         sums: &mut PairSums,
     ) {
         let Some((geometry, hint)) = polygons.results.lane(lane) else {
-            self.one_pair_left_by_block::<FRICTIONAL>((p, None), (state, active, record), sums);
+            self.one_pair_left_by_block::<FRICTIONAL>(p, None, state, active, record, sums);
             return;
         };
         let forces = &polygons.forces;
         let at = |v: &BlockLanes| v.0[lane];
         if !SecantLaw::in_domain(at(&forces.denominator), at(&forces.floor)) {
             let computed = Some((geometry, hint));
-            let slots = (state, active, record);
-            self.one_pair_left_by_block::<FRICTIONAL>((p, computed), slots, sums);
+            self.one_pair_left_by_block::<FRICTIONAL>(p, computed, state, active, record, sums);
             return;
         }
         let pair = |v: &[BlockLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
