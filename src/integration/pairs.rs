@@ -262,17 +262,17 @@ impl<'a> PairPass<'a> {
 
     #[inline(always)]
     fn second_end(&self, p: usize, first: &Frame, second: &Frame) -> SecondEnd {
-        let mut end = SecondEnd {
-            center: second.center,
-            branch: DVec2::ZERO,
-            affine_rate: DVec2::ZERO,
-        };
-        if let Some((cell, velocity_gradient)) = &self.periodic {
-            end.center += cell.image_shift(self.images[p]);
-            end.branch = end.center - first.center;
-            end.affine_rate = affine_rate(velocity_gradient, end.branch.into()).into();
+        match &self.periodic {
+            Some((cell, velocity_gradient)) => {
+                let shift = cell.image_shift(self.images[p]);
+                end_at_image(first, second, shift, velocity_gradient)
+            }
+            None => SecondEnd {
+                center: second.center,
+                branch: DVec2::ZERO,
+                affine_rate: DVec2::ZERO,
+            },
         }
-        end
     }
 
     /// Pair `p` on its own: any pair of grains, any case. `computed`: the pair's contact and
@@ -657,10 +657,8 @@ impl<'a> PolygonsAhead<'a> {
             return None;
         }
         let (block, ends) = (&mut self.block, &mut self.ends);
-        // The block's pairs as the list numbers them (the chunk's are `self.pairs`).
-        let mut list_pairs = [first_pair + k; BLOCK];
-        ends[0] = pass.frames_of(list_pairs[0]);
-        block[0] = pass.lane_pair(list_pairs[0], ends[0], states[k].hint);
+        ends[0] = pass.frames_of(first_pair + k);
+        block[0] = pass.lane_pair(first_pair + k, ends[0], states[k].hint);
         self.pairs[0] = k;
         let mut filled = 1;
         let window = &states[k + 1..(k + POLYGON_WINDOW).min(states.len())];
@@ -671,7 +669,6 @@ impl<'a> PolygonsAhead<'a> {
                 ends[filled] = pass.frames_of(p);
                 block[filled] = pass.lane_pair(p, ends[filled], hint);
                 self.pairs[filled] = ahead;
-                list_pairs[filled] = p;
                 filled += 1;
                 if filled == BLOCK {
                     break;
@@ -688,7 +685,7 @@ impl<'a> PolygonsAhead<'a> {
         // there: `new`).
         #[cfg(target_arch = "x86_64")]
         unsafe {
-            self.input.set_pairs_avx(pass, &list_pairs, ends);
+            self.input.set_pairs_avx(pass, block, ends);
             polygon_pair_forces_avx(
                 &self.results,
                 &self.input,
@@ -810,24 +807,25 @@ struct PolygonPairs {
 }
 
 impl PolygonPairs {
-    /// The lanes set to the pairs `pairs` of `pass`, whose grains' frames are `ends`.
+    /// The lanes set to the pairs `block` of `pass`, whose grains' frames are `ends`.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn set_pairs_avx(
         &mut self,
         pass: &PairPass<'_>,
-        pairs: &[usize; BLOCK],
+        block: &[LanePair<'_>; BLOCK],
         ends: &[[&Frame; 2]; BLOCK],
     ) {
         self.first
             .set_avx([ends[0][0], ends[1][0], ends[2][0], ends[3][0]]);
         self.second
             .set_avx([ends[0][1], ends[1][1], ends[2][1], ends[3][1]]);
-        if pass.periodic.is_none() {
+        let Some((_, velocity_gradient)) = &pass.periodic else {
             return;
-        }
-        for (lane, (&p, [first, second])) in pairs.iter().zip(ends).enumerate() {
-            let end = pass.second_end(p, first, second);
+        };
+        // The block holds each pair's image shift already.
+        for (lane, (pair, [first, second])) in block.iter().zip(ends).enumerate() {
+            let end = end_at_image(first, second, pair.j_shift, velocity_gradient);
             let values = [
                 (&mut self.second.center, end.center),
                 (&mut self.branch, end.branch),
@@ -898,11 +896,11 @@ fn lane_response<T: Real>(
     };
 }
 
-/// The normal forces of a block of polygon contacts `contacts` between the grains `first` and
-/// `second` (met where `images` says, in a periodic cell), as [`PairPass::one_pair`] computes
-/// the force of a contact in the law's domain, in its order: [`SecantLaw::response`], the
-/// relative velocity at the contact point and [`damped_normal_force`]. Lanes off the path or
-/// out of the domain compute values nobody reads.
+/// The normal forces of a block of polygon contacts `contacts` of the pairs `pairs`, as
+/// [`PairPass::one_pair`] computes the force of a contact in the law's domain, in its order:
+/// [`SecantLaw::response`], the relative velocity at the contact point and
+/// [`damped_normal_force`] ([`lane_response`]). Lanes off the path or out of the domain compute
+/// values nobody reads.
 #[inline(always)]
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn polygon_pair_forces(
@@ -943,6 +941,25 @@ fn polygon_pair_forces_avx(
     out: &mut PolygonPairForces,
 ) {
     polygon_pair_forces(contacts, pairs, law, damping_ratio, out);
+}
+
+/// In a periodic cell, where the second grain of a pair (`first`, `second`) is met: at its image
+/// shifted by `shift`, with the branch vector and the affine field's `L d` (`velocity_gradient`
+/// L).
+#[inline(always)]
+fn end_at_image(
+    first: &Frame,
+    second: &Frame,
+    shift: DVec2,
+    velocity_gradient: &DMat2,
+) -> SecondEnd {
+    let center = second.center + shift;
+    let branch = center - first.center;
+    SecondEnd {
+        center,
+        branch,
+        affine_rate: affine_rate(velocity_gradient, branch.into()).into(),
+    }
 }
 
 /// The contact length `L_c` of a chord of half length `half_chord`.
