@@ -197,11 +197,20 @@ impl NeighborList {
         }
         let max_reach = largest_reach(reach);
         let mut cell = (2.0 * max_reach + self.skin).max(f64::MIN_POSITIVE);
-        let (mut lo, mut hi) = (centers[0], centers[0]);
-        for c in centers {
-            lo = lo.min(*c);
-            hi = hi.max(*c);
-        }
+        // The grains' bounding box, in parallel: min and max are exact, so the box does not
+        // depend on how the threads split the grains (but for the sign of a zero bound, which
+        // no bin or width below tells apart).
+        let (lo, hi) = centers
+            .par_iter()
+            .with_min_len(8192)
+            .fold(
+                || (centers[0], centers[0]),
+                |(lo, hi), &c| (lo.min(c), hi.max(c)),
+            )
+            .reduce(
+                || (centers[0], centers[0]),
+                |(lo_a, hi_a), (lo_b, hi_b)| (lo_a.min(lo_b), hi_a.max(hi_b)),
+            );
         // At most max(4 n, 2^16) cells: grains far apart for their size (a sparse or absurd
         // sample, e.g. radii of 1e-45 in a sample file) would otherwise ask for up to 2^30, and
         // their quotients below would overflow usize. A coarser grid finds the same pairs (each
@@ -234,12 +243,16 @@ impl NeighborList {
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order: two allocations a chunk, not one
         // a grain (they were a tenth of a build).
-        let chunks: Vec<Vec<[u32; 2]>> = (0..n.div_ceil(BUILD_CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
+        // Each task also writes its grains' first ends into `first_offsets`, counted from the
+        // chunk's first pair (`append_chunks` adds where the chunk starts).
+        let chunks: Vec<Vec<[u32; 2]>> = self.first_offsets[1..]
+            .par_chunks_mut(BUILD_CHUNK)
+            .enumerate()
+            .map(|(chunk, first_ends)| {
                 let mut pairs = Vec::new();
                 let mut found = Vec::new();
-                for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
+                let start = chunk * BUILD_CHUNK;
+                for (i, first_end) in (start..).zip(first_ends) {
                     let (ci, reach_i) = (centers[i], reach[i]);
                     let bin = bin_of_grain[i] as usize;
                     let (cx, cy) = (bin % cols, bin / cols);
@@ -261,25 +274,60 @@ impl NeighborList {
                     }
                     found.sort_unstable();
                     pairs.extend(found.iter().map(|&j| [i as u32, j]));
+                    *first_end = pairs.len() as u32;
                 }
                 pairs
             })
             .collect();
-        self.pairs.reserve(chunks.iter().map(Vec::len).sum());
-        for chunk in &chunks {
-            self.pairs.extend_from_slice(chunk);
+        self.append_chunks(&chunks, None);
+        self.index_second_ends(n);
+    }
+
+    /// Appends the pairs of a build's chunks (the chunks of [`BUILD_CHUNK`] grains, in order)
+    /// to the list, and their images (a periodic build) to `images`; each chunk's grains'
+    /// `first_offsets`, counted from the chunk's first pair, are moved to the list's. In
+    /// parallel, chunk by chunk: serial, the copies were some 5% of a build on one thread, and
+    /// a serial part of every build on more.
+    fn append_chunks(&mut self, chunks: &[Vec<[u32; 2]>], images: Option<&[Vec<[i64; 2]>]>) {
+        let starts: Vec<usize> = chunks
+            .iter()
+            .scan(0, |start, chunk| {
+                let first = *start;
+                *start += chunk.len();
+                Some(first)
+            })
+            .collect();
+        let total: usize = chunks.iter().map(Vec::len).sum();
+        assert!(
+            total < 1 << 31,
+            "{total} candidate pairs: the index of grain ends holds at most 2^31"
+        );
+        concatenate_in_parallel(&mut self.pairs, chunks);
+        if let Some(images) = images {
+            concatenate_in_parallel(&mut self.images, images);
         }
-        self.index_pairs_by_grain(n);
+        self.first_offsets[1..]
+            .par_chunks_mut(BUILD_CHUNK)
+            .zip(&starts)
+            .for_each(|(first_ends, &start)| {
+                for end in first_ends {
+                    *end += start as u32;
+                }
+            });
     }
 
     /// Resets the list for a build; false when there are no grains.
     fn start_build(&mut self, centers: &[DVec2], reach: &[f64]) -> bool {
         let n = centers.len();
         self.builds += 1;
+        // Copied in parallel (an indexed iterator's `par_extend` writes in place): serial, the
+        // copies were a serial part of every build.
         self.reference_centers.clear();
-        self.reference_centers.extend_from_slice(centers);
+        self.reference_centers
+            .par_extend(centers.par_iter().with_min_len(8192).copied());
         self.reference_reach.clear();
-        self.reference_reach.extend_from_slice(reach);
+        self.reference_reach
+            .par_extend(reach.par_iter().with_min_len(8192).copied());
         self.reference_matrix = None;
         self.affine_scale = DVec2::ONE;
         self.pairs.clear();
@@ -341,12 +389,13 @@ impl NeighborList {
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
         // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
-        let chunks: Vec<ChunkPairs> = (0..n.div_ceil(BUILD_CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
+        let chunks: Vec<ChunkPairs> = self.first_offsets[1..]
+            .par_chunks_mut(BUILD_CHUNK)
+            .enumerate()
+            .map(|(chunk, first_ends)| {
                 let (mut pairs, mut images) = (Vec::new(), Vec::new());
                 let mut found: Vec<(u32, [i64; 2])> = Vec::new();
-                for i in chunk * BUILD_CHUNK..((chunk + 1) * BUILD_CHUNK).min(n) {
+                for (i, first_end) in (chunk * BUILD_CHUNK..).zip(first_ends) {
                     let (ci, reach_i) = (centers[i], reach[i]);
                     let (cx, cy) = unpack(column_and_row[i]);
                     found.clear();
@@ -373,34 +422,23 @@ impl NeighborList {
                     found.sort_unstable_by_key(|(j, _)| *j);
                     pairs.extend(found.iter().map(|&(j, _)| [i as u32, j]));
                     images.extend(found.iter().map(|&(_, image)| image));
+                    *first_end = pairs.len() as u32;
                 }
                 (pairs, images)
             })
             .collect();
-        let total = chunks.iter().map(|(pairs, _)| pairs.len()).sum();
-        self.pairs.reserve(total);
-        self.images.reserve(total);
-        for (pairs, images) in &chunks {
-            self.pairs.extend_from_slice(pairs);
-            self.images.extend_from_slice(images);
-        }
-        self.index_pairs_by_grain(n);
+        let (pairs, images): (Vec<_>, Vec<_>) = chunks.into_iter().unzip();
+        self.append_chunks(&pairs, Some(&images));
+        self.index_second_ends(n);
     }
 
-    /// Fills `first_offsets`, `second_offsets` and `second_pairs` from `pairs`. Only the second
-    /// ends need a transposition (a pass that scatters): the first ends are runs of the list.
-    fn index_pairs_by_grain(&mut self, n: usize) {
-        assert!(
-            self.pairs.len() < 1 << 31,
-            "{} candidate pairs: the index of grain ends holds at most 2^31",
-            self.pairs.len()
-        );
-        for [i, j] in &self.pairs {
-            self.first_offsets[*i as usize + 1] += 1;
+    /// Fills `second_offsets` and `second_pairs` from `pairs`: a transposition (a pass that
+    /// scatters), serial. The first ends are runs of the list, counted by the build's tasks.
+    fn index_second_ends(&mut self, n: usize) {
+        for [_, j] in &self.pairs {
             self.second_offsets[*j as usize + 1] += 1;
         }
         for g in 0..n {
-            self.first_offsets[g + 1] += self.first_offsets[g];
             self.second_offsets[g + 1] += self.second_offsets[g];
         }
         self.second_pairs.resize(self.pairs.len(), 0);
@@ -447,7 +485,7 @@ impl NeighborList {
         let (first, second) = (&self.first_offsets, &self.second_offsets);
         assert!(g + 1 < first.len() && first.len() == second.len());
         // SAFETY: g + 1 is below both offsets' lengths (asserted above). The offsets of the
-        // second ends are prefix sums of counts (`index_pairs_by_grain`, which writes them and
+        // second ends are prefix sums of counts (`index_second_ends`, which writes them and
         // `second_pairs` together; nothing else does but to clear both), so that
         // `second[g] <= second[g + 1] <= second_pairs.len()`.
         unsafe {
@@ -511,7 +549,8 @@ impl BinnedGrain {
     /// The grains `order` (the bins' grains, bin after bin), each with its centre and reach.
     fn in_order(order: &[u32], centers: &[DVec2], reach: &[f64]) -> Vec<BinnedGrain> {
         order
-            .iter()
+            .par_iter()
+            .with_min_len(8192)
             .map(|&j| BinnedGrain {
                 center: centers[j as usize],
                 reach: reach[j as usize],
@@ -541,6 +580,32 @@ fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Ve
     (start, grains)
 }
 
+/// Replaces the contents of `to` with the `chunks` one after the other, each chunk copied by a
+/// task of its own.
+fn concatenate_in_parallel<T: Copy + Send + Sync>(to: &mut Vec<T>, chunks: &[Vec<T>]) {
+    let total: usize = chunks.iter().map(Vec::len).sum();
+    to.clear();
+    to.reserve(total);
+    let mut places = Vec::with_capacity(chunks.len());
+    let mut rest = &mut to.spare_capacity_mut()[..total];
+    for chunk in chunks {
+        let (place, tail) = std::mem::take(&mut rest).split_at_mut(chunk.len());
+        places.push(place);
+        rest = tail;
+    }
+    places
+        .into_par_iter()
+        .zip(chunks)
+        .for_each(|(place, chunk)| {
+            for (slot, &value) in place.iter_mut().zip(chunk) {
+                slot.write(value);
+            }
+        });
+    // SAFETY: the places cut from the first `total` entries of the spare capacity, one for
+    // each chunk and as long as it, were each written in full above.
+    unsafe { to.set_len(total) };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -553,8 +618,28 @@ mod tests {
             .map(|_| DVec2::new(next() * 3.0, next() * 2.0))
             .collect();
         let reach: Vec<f64> = (0..500).map(|_| 0.02 + 0.05 * next()).collect();
-        let mut list = NeighborList::new(0.01);
-        list.build(&centers, &reach);
+        // The build's tasks write their chunks' pairs and first ends in parallel: the list
+        // must not depend on how many threads run them.
+        let built_on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut list = NeighborList::new(0.01);
+            pool.install(|| list.build(&centers, &reach));
+            list
+        };
+        let list = built_on(1);
+        for threads in [2, 3, 5] {
+            let other = built_on(threads);
+            assert_eq!(other.pairs, list.pairs, "{threads} threads");
+            assert_eq!(other.first_offsets, list.first_offsets, "{threads} threads");
+            assert_eq!(
+                other.second_offsets, list.second_offsets,
+                "{threads} threads"
+            );
+            assert_eq!(other.second_pairs, list.second_pairs, "{threads} threads");
+        }
         let mut brute = Vec::new();
         for i in 0..500 {
             for j in i + 1..500 {
@@ -712,6 +797,34 @@ mod tests {
                 .zip(list.images.iter().copied())
                 .collect();
             assert_eq!(found, brute, "cell {h1:?} {h2:?}");
+            // Each grain's ends, as in a box, whatever the thread count.
+            for g in 0..count {
+                let holding = |end: usize| -> Vec<usize> {
+                    (0..brute.len())
+                        .filter(|&p| brute[p].0[end] as usize == g)
+                        .collect()
+                };
+                let seconds: Vec<usize> =
+                    list.second_ends_of(g).iter().map(|&p| p as usize).collect();
+                assert_eq!(seconds, holding(1), "grain {g} as second");
+                assert_eq!(list.first_ends_of(g).collect::<Vec<_>>(), holding(0));
+            }
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut other = NeighborList::new(skin);
+                pool.install(|| other.build_periodic(&centers, &reach, &cell));
+                assert_eq!(other.pairs, list.pairs, "{threads} threads");
+                assert_eq!(other.images, list.images, "{threads} threads");
+                assert_eq!(other.first_offsets, list.first_offsets, "{threads} threads");
+                assert_eq!(
+                    other.second_offsets, list.second_offsets,
+                    "{threads} threads"
+                );
+                assert_eq!(other.second_pairs, list.second_pairs, "{threads} threads");
+            }
             assert!(!list.needs_rebuild_periodic(&centers, &reach, &cell));
         }
     }

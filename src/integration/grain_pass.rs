@@ -355,7 +355,7 @@ impl GrainPass<'_> {
             let pair = pair as usize;
             debug_assert!(pair < pairs);
             // SAFETY: `pair` is an entry of the list's index of second ends, which holds
-            // indices of its pairs only (`NeighborList::index_pairs_by_grain`), and both
+            // indices of its pairs only (`NeighborList::index_second_ends`), and both
             // slices have one entry for each of the list's pairs (asserted above).
             let (active, c) = unsafe {
                 (
