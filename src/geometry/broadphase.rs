@@ -610,6 +610,34 @@ fn concatenate_in_parallel<T: Copy + Send + Sync>(to: &mut Vec<T>, chunks: &[Vec
 mod tests {
     use super::*;
 
+    /// Runs `work` on a pool of `threads` threads.
+    fn on_threads(threads: usize, work: impl FnOnce() + Send) {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(work)
+    }
+
+    /// Expectation: two builds of the same grains give the same list and index, entry for
+    /// entry (`threads`: the thread count of `list`'s build, for the message).
+    fn assert_same_list(list: &NeighborList, expected: &NeighborList, threads: usize) {
+        assert_eq!(list.pairs, expected.pairs, "{threads} threads");
+        assert_eq!(list.images, expected.images, "{threads} threads");
+        assert_eq!(
+            list.first_offsets, expected.first_offsets,
+            "{threads} threads"
+        );
+        assert_eq!(
+            list.second_offsets, expected.second_offsets,
+            "{threads} threads"
+        );
+        assert_eq!(
+            list.second_pairs, expected.second_pairs,
+            "{threads} threads"
+        );
+    }
+
     #[test]
     fn finds_exactly_the_pairs_of_a_brute_force_search() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(12345);
@@ -620,25 +648,14 @@ mod tests {
         let reach: Vec<f64> = (0..500).map(|_| 0.02 + 0.05 * next()).collect();
         // The build's tasks write their chunks' pairs and first ends in parallel: the list
         // must not depend on how many threads run them.
-        let built_on = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+        let build_on = |threads: usize| {
             let mut list = NeighborList::new(0.01);
-            pool.install(|| list.build(&centers, &reach));
+            on_threads(threads, || list.build(&centers, &reach));
             list
         };
-        let list = built_on(1);
+        let list = build_on(1);
         for threads in [2, 3, 5] {
-            let other = built_on(threads);
-            assert_eq!(other.pairs, list.pairs, "{threads} threads");
-            assert_eq!(other.first_offsets, list.first_offsets, "{threads} threads");
-            assert_eq!(
-                other.second_offsets, list.second_offsets,
-                "{threads} threads"
-            );
-            assert_eq!(other.second_pairs, list.second_pairs, "{threads} threads");
+            assert_same_list(&build_on(threads), &list, threads);
         }
         let mut brute = Vec::new();
         for i in 0..500 {
@@ -810,20 +827,9 @@ mod tests {
                 assert_eq!(list.first_ends_of(g).collect::<Vec<_>>(), holding(0));
             }
             for threads in [1, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
                 let mut other = NeighborList::new(skin);
-                pool.install(|| other.build_periodic(&centers, &reach, &cell));
-                assert_eq!(other.pairs, list.pairs, "{threads} threads");
-                assert_eq!(other.images, list.images, "{threads} threads");
-                assert_eq!(other.first_offsets, list.first_offsets, "{threads} threads");
-                assert_eq!(
-                    other.second_offsets, list.second_offsets,
-                    "{threads} threads"
-                );
-                assert_eq!(other.second_pairs, list.second_pairs, "{threads} threads");
+                on_threads(threads, || other.build_periodic(&centers, &reach, &cell));
+                assert_same_list(&other, &list, threads);
             }
             assert!(!list.needs_rebuild_periodic(&centers, &reach, &cell));
         }
