@@ -286,8 +286,8 @@ impl NeighborList {
     /// Appends the pairs of a build's chunks (the chunks of [`BUILD_CHUNK`] grains, in order)
     /// to the list, and their images (a periodic build) to `images`; each chunk's grains'
     /// `first_offsets`, counted from the chunk's first pair, are moved to the list's. In
-    /// parallel, chunk by chunk: serial, the copies were some 5% of a build on one thread, and
-    /// a serial part of every build on more.
+    /// parallel, chunk by chunk: serial, the copies (with a count of the first ends) ran on
+    /// one thread whatever the thread count (docs/performance.md, twenty-ninth session).
     fn append_chunks(&mut self, chunks: &[Vec<[u32; 2]>], images: Option<&[Vec<[i64; 2]>]>) {
         let starts: Vec<usize> = chunks
             .iter()
