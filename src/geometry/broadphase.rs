@@ -297,12 +297,12 @@ impl NeighborList {
                 Some(first)
             })
             .collect();
-        let total: usize = chunks.iter().map(Vec::len).sum();
-        assert!(
-            total < 1 << 31,
-            "{total} candidate pairs: the index of grain ends holds at most 2^31"
-        );
         concatenate_in_parallel(&mut self.pairs, chunks);
+        assert!(
+            self.pairs.len() < 1 << 31,
+            "{} candidate pairs: the index of grain ends holds at most 2^31",
+            self.pairs.len()
+        );
         if let Some(images) = images {
             concatenate_in_parallel(&mut self.images, images);
         }
