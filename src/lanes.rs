@@ -28,6 +28,8 @@ pub trait Real:
     fn max(self, other: Self) -> Self;
     /// As [`f64::min`], and `other` where the two are equal (see [`Real::max`]).
     fn min(self, other: Self) -> Self;
+    /// `then` where `self > than`, else `otherwise` (a NaN compares false), lane by lane.
+    fn if_greater(self, than: Self, then: Self, otherwise: Self) -> Self;
 }
 
 /// [`Real::max`] of one lane: a select, the same in scalar and vector instructions.
@@ -58,6 +60,10 @@ impl Real for f64 {
     #[inline(always)]
     fn min(self, other: Self) -> Self {
         lane_min(self, other)
+    }
+    #[inline(always)]
+    fn if_greater(self, than: Self, then: Self, otherwise: Self) -> Self {
+        if self > than { then } else { otherwise }
     }
 }
 
@@ -141,6 +147,16 @@ impl<const N: usize> Real for Lanes<N> {
     #[inline(always)]
     fn min(self, other: Self) -> Self {
         self.zip(other, lane_min)
+    }
+    #[inline(always)]
+    fn if_greater(self, than: Self, then: Self, otherwise: Self) -> Self {
+        Lanes(std::array::from_fn(|l| {
+            if self.0[l] > than.0[l] {
+                then.0[l]
+            } else {
+                otherwise.0[l]
+            }
+        }))
     }
 }
 

@@ -3,6 +3,7 @@
 //! Stress and strain are tension positive. `lost_fraction` is the area a grain loses to its
 //! contacts, `sum_j S_j`, divided by its reference area `pi R^2`.
 
+use crate::lanes::Real;
 use serde::{Deserialize, Serialize};
 
 /// Elastic, isotropic grain material.
@@ -73,39 +74,46 @@ pub struct Moduli {
     pub incompressible: bool,
 }
 
+// The laws below are written over `T: Real`, for one grain (`f64`) or lanes of grains side by
+// side (the grain pass's blocks): the same formula, the same bits lane by lane.
+
 /// Volumetric strain of eq. 41: `(1+eps1)(1+eps2) - lost_fraction - 1`.
-#[inline]
-pub fn volumetric_strain(eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
-    (1.0 + eps1) * (1.0 + eps2) - lost_fraction - 1.0
+#[inline(always)]
+pub fn volumetric_strain<T: Real>(eps1: T, eps2: T, lost_fraction: T) -> T {
+    let one = T::splat(1.0);
+    (one + eps1) * (one + eps2) - lost_fraction - one
 }
 
 /// Principal grain stresses (sigma_1, sigma_2), along e1 and e2.
 /// Compressible: `sigma_i = 2 mu eps_idev + kappa eps_V` (eq. 42–43 with eps1dev = -eps2dev);
 /// incompressible: `sigma_i = 2 mu eps_idev` (eq. 65–66).
-#[inline]
-pub fn principal_stress(moduli: &Moduli, eps1: f64, eps2: f64, lost_fraction: f64) -> (f64, f64) {
+#[inline(always)]
+pub fn principal_stress<T: Real>(moduli: &Moduli, eps1: T, eps2: T, lost_fraction: T) -> (T, T) {
     let mu = moduli.shear;
-    let half_difference = 0.5 * (eps1 - eps2);
-    let (dev1, dev2) = (2.0 * mu * half_difference, -2.0 * mu * half_difference);
+    let half_difference = T::splat(0.5) * (eps1 - eps2);
+    let (dev1, dev2) = (
+        T::splat(2.0 * mu) * half_difference,
+        T::splat(-2.0 * mu) * half_difference,
+    );
     if moduli.incompressible {
         (dev1, dev2)
     } else {
-        let pressure_part = moduli.bulk * volumetric_strain(eps1, eps2, lost_fraction);
+        let pressure_part = T::splat(moduli.bulk) * volumetric_strain(eps1, eps2, lost_fraction);
         (dev1 + pressure_part, dev2 + pressure_part)
     }
 }
 
 /// Strain energy per unit reference area: `mu (d1^2 + d2^2) + kappa/2 eps_V^2` (the deviatoric
 /// part alone when incompressible).
-#[inline]
-pub fn strain_energy_density(moduli: &Moduli, eps1: f64, eps2: f64, lost_fraction: f64) -> f64 {
-    let half_difference = 0.5 * (eps1 - eps2);
-    let deviatoric = 2.0 * moduli.shear * half_difference * half_difference;
+#[inline(always)]
+pub fn strain_energy_density<T: Real>(moduli: &Moduli, eps1: T, eps2: T, lost_fraction: T) -> T {
+    let half_difference = T::splat(0.5) * (eps1 - eps2);
+    let deviatoric = T::splat(2.0 * moduli.shear) * half_difference * half_difference;
     if moduli.incompressible {
         deviatoric
     } else {
         let ev = volumetric_strain(eps1, eps2, lost_fraction);
-        deviatoric + 0.5 * moduli.bulk * ev * ev
+        deviatoric + T::splat(0.5 * moduli.bulk) * ev * ev
     }
 }
 
@@ -113,10 +121,11 @@ pub fn strain_energy_density(moduli: &Moduli, eps1: f64, eps2: f64, lost_fractio
 /// principal strains `(d1 + e/2, d2 + e/2)` for which the grain's current area
 /// `pi R^2 (1+eps1)(1+eps2) - sum S_j` equals its reference area `pi R^2`.
 /// With d2 = -d1 the root of eq. 68 simplifies to `e = 2 sqrt(1 + lost_fraction + d1^2) - 2`.
-#[inline]
-pub fn incompressible_strains(eps1: f64, eps2: f64, lost_fraction: f64) -> (f64, f64) {
-    let d1 = 0.5 * (eps1 - eps2);
-    let half_add = (1.0 + lost_fraction + d1 * d1).sqrt() - 1.0;
+#[inline(always)]
+pub fn incompressible_strains<T: Real>(eps1: T, eps2: T, lost_fraction: T) -> (T, T) {
+    let one = T::splat(1.0);
+    let d1 = T::splat(0.5) * (eps1 - eps2);
+    let half_add = (one + lost_fraction + d1 * d1).sqrt() - one;
     (d1 + half_add, -d1 + half_add)
 }
 

@@ -39,6 +39,9 @@ impl ModelLevel {
 /// One grain. Angles in radians; strains are principal stretches minus one (semi-axes
 /// `R (1 + eps_i)`), tension positive.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+// Fields in this order, with no padding: the grain pass moves blocks of records into lanes
+// (`integration::grain_block`).
+#[repr(C)]
 pub struct Grain {
     /// Reference radius R.
     pub radius: f64,

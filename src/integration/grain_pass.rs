@@ -4,9 +4,10 @@
 //! while they are still in cache, deforming grains four at a time (see
 //! [`World::frames_current`](super::World)).
 
+use super::grain_block::{BLOCK_GRAINS, BlockConstants, BlockLoads, advance_full_block};
 use super::{
     BoxCarry, ChunkSums, FRAME_LANES, Frame, GRAIN_CHUNK, GrainStress, Instability, MAX_WALLS,
-    PairContact, Parameters,
+    PairContact, Parameters, StepTotals,
 };
 use crate::boundary::periodic::{CellMotion, PeriodicCell};
 use crate::boundary::walls::Wall;
@@ -55,6 +56,9 @@ pub(super) struct GrainPass<'a> {
     pub dt: f64,
     /// The half of a multi-rate cycle this pass runs; `None` for a plain step.
     pub cycle: Option<CycleHalf<'a>>,
+    /// Whether chunks with full-level grains go by blocks (see [`GrainPass::by_blocks`]): on a
+    /// plain step, where the processor runs them.
+    pub blocks: bool,
 }
 
 /// One half of a multi-rate cycle (see [`World::step`](super::World::step)).
@@ -119,7 +123,7 @@ impl GrainPass<'_> {
     /// the start of the step; each is replaced by the frame of its updated grain, and its
     /// centre and reach (the broad phase's) with it. Returns the chunk's sums, in grain order.
     pub fn chunk(&self, first: usize, mut chunk: GrainChunk<'_>) -> ChunkSums {
-        let (params, walls, step) = (self.params, self.walls, self.step);
+        let (params, walls) = (self.params, self.walls);
         let density = params.material.density;
         let mut sums = ChunkSums::default();
         let near_wall = walls_in_reach(chunk.centers, chunk.reach, walls);
@@ -135,141 +139,377 @@ impl GrainPass<'_> {
         } else {
             &[]
         };
-        for (k, ((((grain, stress), level), wall_history), frame)) in chunk
-            .grains
-            .iter_mut()
-            .zip(chunk.stresses.iter_mut())
-            .zip(chunk.levels.iter_mut())
-            .zip(chunk.wall_histories.iter_mut())
-            .zip(chunk.frames.iter_mut())
-            .enumerate()
-        {
-            let g = first + k;
-            let turn = match &self.cycle {
-                None => Turn::Plain,
-                Some(c) => match (c.fast[g], c.second) {
-                    (true, false) => Turn::FastFirst,
-                    (false, false) => Turn::SlowFirst,
-                    (true, true) => Turn::FastSecond,
-                    (false, true) => Turn::SlowSecond,
-                },
-            };
-            if turn == Turn::SlowSecond {
-                self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
+        // A chunk with full-level grains, on a plain step, goes by blocks of four: those whose
+        // grains are all at the full level have their updates run side by side in lanes, the
+        // others go one by one. Any other chunk goes one by one.
+        let full = if self.blocks {
+            chunk
+                .levels
+                .iter()
+                .filter(|level| level.level == ModelLevel::Full)
+                .count()
+        } else {
+            0
+        };
+        let all_full = full == chunk.grains.len();
+        let blocks_done = if full > 0 {
+            self.by_blocks(
+                first,
+                &mut chunk,
+                all_full,
+                chunk_walls,
+                &near_wall,
+                &constants,
+                directions,
+                &mut sums,
+            )
+        } else {
+            for (k, ((((grain, stress), level), wall_history), frame)) in chunk
+                .grains
+                .iter_mut()
+                .zip(chunk.stresses.iter_mut())
+                .zip(chunk.levels.iter_mut())
+                .zip(chunk.wall_histories.iter_mut())
+                .zip(chunk.frames.iter())
+                .enumerate()
+            {
+                self.one_grain(
+                    first + k,
+                    grain,
+                    stress,
+                    level,
+                    wall_history,
+                    frame,
+                    &mut chunk.wraps[k],
+                    chunk_walls,
+                    &near_wall,
+                    &constants,
+                    directions[k],
+                    &mut sums,
+                );
+            }
+            0
+        };
+        write_frames(&mut chunk, blocks_done, density, &mut sums);
+        sums
+    }
+
+    /// Grain `g` over the pass, alone: its contact loads, its update, its records, sums and
+    /// failures. `frame`: its frame at the start of the step; `direction`: its
+    /// [principal direction](Grain::principal_direction) (read unless it is rigid).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn one_grain(
+        &self,
+        g: usize,
+        grain: &mut Grain,
+        stress: &mut GrainStress,
+        level: &mut GrainLevel,
+        wall_history: &mut [f64; MAX_WALLS],
+        frame: &Frame,
+        wrap: &mut [i64; 2],
+        chunk_walls: &[Wall],
+        near_wall: &[bool; MAX_WALLS],
+        constants: &UpdateConstants,
+        direction: DVec2,
+        sums: &mut ChunkSums,
+    ) {
+        let turn = match &self.cycle {
+            None => Turn::Plain,
+            Some(c) => match (c.fast[g], c.second) {
+                (true, false) => Turn::FastFirst,
+                (false, false) => Turn::SlowFirst,
+                (true, true) => Turn::FastSecond,
+                (false, true) => Turn::SlowSecond,
+            },
+        };
+        if turn == Turn::SlowSecond {
+            self.follow_box(grain, wrap, sums);
+            return;
+        }
+        let dt = turn.dt(self.dt);
+        let tallied = turn.tallied();
+        let mut load = if self.frictional_pairs {
+            self.pair_load::<true>(g, frame)
+        } else {
+            self.pair_load::<false>(g, frame)
+        };
+        self.add_wall_contacts(
+            g,
+            frame,
+            turn,
+            dt,
+            chunk_walls,
+            near_wall,
+            wall_history,
+            &mut load,
+            &mut sums.totals,
+            &mut sums.failure,
+        );
+        let update = advance_grain(
+            self.params,
+            dt,
+            turn.level_steps(),
+            grain,
+            level,
+            &load,
+            constants,
+            direction,
+            g,
+            self.step,
+        );
+        *stress = update.stress;
+        if let Err(e) = update.result {
+            sums.failure.get_or_insert(e);
+        }
+        if tallied {
+            sums.totals.level_counts[level.level.index()] += 1;
+            sums.totals.grain_area += update.area;
+            sums.totals.elastic_energy += update.elastic_energy;
+            sums.contact_ends += load.contacts as u64;
+        }
+        self.follow_box(grain, wrap, sums);
+    }
+
+    /// A chunk's grains on a plain step by blocks of [`BLOCK_GRAINS`]. A block whose grains are
+    /// all at the full level: its contact loads first, grain by grain, then their updates side
+    /// by side ([`advance_full_block`], which writes their frames too), then each grain's
+    /// adaptive level, checks, sums and failures in grain order (a grain's first wall failure
+    /// before its update's, as one by one). Any other block, and the chunk's last grains, one
+    /// by one ([`GrainPass::one_grain`]). `all_full`: every grain of the chunk is at the full
+    /// level. Returns the blocks that wrote their grains' frames, bit `b` for the grains `4 b`
+    /// to `4 b + 3`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn by_blocks(
+        &self,
+        first: usize,
+        chunk: &mut GrainChunk<'_>,
+        all_full: bool,
+        chunk_walls: &[Wall],
+        near_wall: &[bool; MAX_WALLS],
+        constants: &UpdateConstants,
+        directions: &[DVec2],
+        sums: &mut ChunkSums,
+    ) -> BlocksDone {
+        let params = self.params;
+        let density = params.material.density;
+        let block_constants = block_constants(params, constants, self.dt);
+        let n = chunk.grains.len();
+        let mut done = 0;
+        for start in (0..n).step_by(BLOCK_GRAINS) {
+            let block = start..(start + BLOCK_GRAINS).min(n);
+            if block.len() < BLOCK_GRAINS
+                || !all_full
+                    && chunk.levels[block.clone()]
+                        .iter()
+                        .any(|level| level.level != ModelLevel::Full)
+            {
+                for k in block {
+                    self.one_grain(
+                        first + k,
+                        &mut chunk.grains[k],
+                        &mut chunk.stresses[k],
+                        &mut chunk.levels[k],
+                        &mut chunk.wall_histories[k],
+                        &chunk.frames[k],
+                        &mut chunk.wraps[k],
+                        chunk_walls,
+                        near_wall,
+                        constants,
+                        directions[k],
+                        sums,
+                    );
+                }
                 continue;
             }
-            let dt = turn.dt(self.dt);
-            let tallied = turn.tallied();
-            let mut load = if self.frictional_pairs {
-                self.pair_load::<true>(g, frame)
-            } else {
-                self.pair_load::<false>(g, frame)
-            };
-            for (w, wall) in chunk_walls.iter().enumerate() {
-                // A contact that is open this step drops its history. A wall without friction
-                // never has one: its row is left untouched, not rewritten with zeros every
-                // step.
-                let history = if self.wall_friction[w] > 0.0 {
-                    std::mem::take(&mut wall_history[w])
+            let mut loads = BlockLoads::default();
+            let mut contacts = [[0u32; 2]; BLOCK_GRAINS];
+            // The block's first wall failure and its grain: a later one would never be kept.
+            let mut wall_failure = None;
+            let mut wall_failure_lane = BLOCK_GRAINS;
+            for (l, lane_contacts) in contacts.iter_mut().enumerate() {
+                let (k, g) = (start + l, first + start + l);
+                let frame = &chunk.frames[k];
+                let mut load = if self.frictional_pairs {
+                    self.pair_load::<true>(g, frame)
                 } else {
-                    0.0
+                    self.pair_load::<false>(g, frame)
                 };
-                // Most grains are far from every wall: skip the call.
-                if !near_wall[w] || wall.height(frame.center) >= frame.bounding_radius {
-                    continue;
+                self.add_wall_contacts(
+                    g,
+                    frame,
+                    Turn::Plain,
+                    self.dt,
+                    chunk_walls,
+                    near_wall,
+                    &mut chunk.wall_histories[k],
+                    &mut load,
+                    &mut sums.totals,
+                    &mut wall_failure,
+                );
+                if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
+                    wall_failure_lane = l;
                 }
-                let overlap = if frame.circle {
-                    disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
-                } else {
-                    self.contours
-                        .grain_wall(&frame.shape(), wall.point, wall.normal)
-                };
-                match overlap {
-                    Overlap::Separate => {}
-                    Overlap::Swallowed => {
-                        sums.failure.get_or_insert(Instability::Swallowed {
+                loads.set_lane(l, &load);
+                *lane_contacts = [load.contacts, load.wall_contacts];
+            }
+            let outcome = advance_full_block(
+                &mut chunk.grains[block.clone()],
+                &mut chunk.stresses[block.clone()],
+                &mut chunk.frames[block.clone()],
+                &loads,
+                &contacts,
+                &directions[block],
+                &block_constants,
+            );
+            done |= 1 << (start / BLOCK_GRAINS);
+            for (l, [pair_contacts, _]) in contacts.into_iter().enumerate() {
+                let (k, g) = (start + l, first + start + l);
+                let (grain, level) = (&mut chunk.grains[k], &mut chunk.levels[k]);
+                if l == wall_failure_lane
+                    && let Some(failure) = wall_failure.take()
+                {
+                    sums.failure.get_or_insert(failure);
+                }
+                // The adaptive level, as `advance_grain` takes it; a grain that steps down has
+                // its rates frozen, and its frame is written again below.
+                let mut stepped_down = false;
+                if let Some(adaptive) = &params.adaptive {
+                    let (mean, deviator) = stress_invariants(chunk.stresses[k].external);
+                    let inv_young = constants.inv_young;
+                    let next = adaptive.settings.next_level(
+                        *level,
+                        mean * inv_young,
+                        deviator * inv_young,
+                    );
+                    if next.level < level.level {
+                        freeze(grain, next.level);
+                        stepped_down = true;
+                    }
+                    *level = next;
+                }
+                if outcome.suspect & (1 << l) != 0
+                    && let Err(e) = check_suspect(grain, constants.wave_speed_squared, g, self.step)
+                {
+                    sums.failure.get_or_insert(e);
+                }
+                sums.totals.level_counts[level.level.index()] += 1;
+                sums.totals.grain_area += outcome.area.0[l];
+                sums.totals.elastic_energy += outcome.elastic_energy.0[l];
+                sums.contact_ends += pair_contacts as u64;
+                self.follow_box(grain, &mut chunk.wraps[k], sums);
+                let frame = &mut chunk.frames[k];
+                if stepped_down {
+                    frame.write(grain, level.level, density);
+                    sums.circle_frames += frame.circle as usize;
+                } else if self.carry.is_some() || self.cell_motion.is_some() {
+                    // The block wrote the frame before the box moved the grain, and a frame's
+                    // centre is the only part of it that the move changes.
+                    frame.center = grain.center;
+                }
+            }
+        }
+        done
+    }
+
+    /// Adds to `load` the contacts of grain `g` (`frame`: the grain at the start of the step)
+    /// with the walls `walls` (those of them `near_wall` says its chunk reaches), their wall
+    /// forces and counts to `totals`; its first failure goes to `failure`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn add_wall_contacts(
+        &self,
+        g: usize,
+        frame: &Frame,
+        turn: Turn,
+        dt: f64,
+        walls: &[Wall],
+        near_wall: &[bool; MAX_WALLS],
+        wall_history: &mut [f64; MAX_WALLS],
+        load: &mut ContactLoad,
+        totals: &mut StepTotals,
+        failure: &mut Option<Instability>,
+    ) {
+        let (params, step, tallied) = (self.params, self.step, turn.tallied());
+        for (w, wall) in walls.iter().enumerate() {
+            // A contact that is open this step drops its history. A wall without friction
+            // never has one: its row is left untouched, not rewritten with zeros every
+            // step.
+            let history = if self.wall_friction[w] > 0.0 {
+                std::mem::take(&mut wall_history[w])
+            } else {
+                0.0
+            };
+            // Most grains are far from every wall: skip the call.
+            if !near_wall[w] || wall.height(frame.center) >= frame.bounding_radius {
+                continue;
+            }
+            let overlap = if frame.circle {
+                disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
+            } else {
+                self.contours
+                    .grain_wall(&frame.shape(), wall.point, wall.normal)
+            };
+            match overlap {
+                Overlap::Separate => {}
+                Overlap::Swallowed => {
+                    failure.get_or_insert(Instability::Swallowed {
+                        step,
+                        grain: g,
+                        other: None,
+                    });
+                }
+                Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
+                    Err(exit) => {
+                        failure.get_or_insert(Instability::ContactDomain {
                             step,
                             grain: g,
                             other: None,
+                            length: exit.length,
+                            normal_gap: exit.normal_gap,
                         });
                     }
-                    Overlap::Contact(c) => match params.law.response(c.length, c.normal_gap) {
-                        Err(exit) => {
-                            sums.failure.get_or_insert(Instability::ContactDomain {
-                                step,
-                                grain: g,
-                                other: None,
-                                length: exit.length,
-                                normal_gap: exit.normal_gap,
-                            });
-                        }
-                        Ok(response) => {
-                            // The wall is the contact's second body.
-                            let relative_velocity = wall.velocity - frame.velocity_at(c.point);
-                            let gap_rate = relative_velocity.dot(c.normal);
-                            let f = damped_normal_force(
-                                response.force,
+                    Ok(response) => {
+                        // The wall is the contact's second body.
+                        let relative_velocity = wall.velocity - frame.velocity_at(c.point);
+                        let gap_rate = relative_velocity.dot(c.normal);
+                        let f = damped_normal_force(
+                            response.force,
+                            response.stiffness,
+                            frame.mass,
+                            params.contact_damping,
+                            gap_rate,
+                        );
+                        let normal_force = f * c.normal;
+                        let mut force = normal_force;
+                        if let Some(friction) = &params.friction
+                            && friction.walls[w] > 0.0
+                        {
+                            let t = friction.law.response(
+                                history,
                                 response.stiffness,
+                                f,
+                                relative_velocity.dot(c.normal.perp()),
+                                friction.walls[w],
                                 frame.mass,
-                                params.contact_damping,
-                                gap_rate,
+                                dt,
                             );
-                            let normal_force = f * c.normal;
-                            let mut force = normal_force;
-                            if let Some(friction) = &params.friction
-                                && friction.walls[w] > 0.0
-                            {
-                                let t = friction.law.response(
-                                    history,
-                                    response.stiffness,
-                                    f,
-                                    relative_velocity.dot(c.normal.perp()),
-                                    friction.walls[w],
-                                    frame.mass,
-                                    dt,
-                                );
-                                wall_history[w] = t.history;
-                                force += t.force * c.normal.perp();
-                                sums.totals.friction_dissipation += t.dissipated;
-                                sums.totals.sliding_contacts += t.sliding as u64;
-                            }
-                            load.add(force, c.point - frame.center, c.cap_area_i);
-                            load.wall_contacts += 1;
-                            sums.totals.wall_force[w] +=
-                                turn.wall_weight() * normal_force.dot(wall.normal);
-                            if tallied {
-                                sums.totals.capped_contacts += response.capped as u64;
-                            }
+                            wall_history[w] = t.history;
+                            force += t.force * c.normal.perp();
+                            totals.friction_dissipation += t.dissipated;
+                            totals.sliding_contacts += t.sliding as u64;
                         }
-                    },
-                }
+                        load.add(force, c.point - frame.center, c.cap_area_i);
+                        load.wall_contacts += 1;
+                        totals.wall_force[w] += turn.wall_weight() * normal_force.dot(wall.normal);
+                        if tallied {
+                            totals.capped_contacts += response.capped as u64;
+                        }
+                    }
+                },
             }
-            let update = advance_grain(
-                params,
-                dt,
-                turn.level_steps(),
-                grain,
-                level,
-                &load,
-                &constants,
-                directions[k],
-                g,
-                step,
-            );
-            *stress = update.stress;
-            if let Err(e) = update.result {
-                sums.failure.get_or_insert(e);
-            }
-            if tallied {
-                sums.totals.level_counts[level.level.index()] += 1;
-                sums.totals.grain_area += update.area;
-                sums.totals.elastic_energy += update.elastic_energy;
-                sums.contact_ends += load.contacts as u64;
-            }
-            self.follow_box(grain, &mut chunk.wraps[k], &mut sums);
         }
-        write_frames(&mut chunk, density, &mut sums);
-        sums
     }
 
     /// Moves an updated grain with its box: the affine carry of a box of walls, or a periodic
@@ -377,26 +617,40 @@ impl GrainPass<'_> {
     }
 }
 
-/// Writes the next step's frames of a chunk's updated grains, and the broad phase's copies of
-/// their centres and reaches: circles one at a time, the other grains in blocks of
-/// [`FRAME_LANES`] ([`Frame::write_full_block`]). After all of the chunk's updates, which read each
-/// grain's frame of the step's start.
-fn write_frames(chunk: &mut GrainChunk<'_>, density: f64, sums: &mut ChunkSums) {
+/// Writes the next step's frames of a chunk's updated grains but those of `blocks_done` (see
+/// [`GrainPass::by_blocks`], which wrote their own), and the broad phase's copies of every
+/// grain's centre and reach:
+/// circles one at a time, the other grains in blocks of [`FRAME_LANES`]
+/// ([`Frame::write_full_block`]). After all of the chunk's updates, which read each grain's
+/// frame of the step's start.
+fn write_frames(
+    chunk: &mut GrainChunk<'_>,
+    blocks_done: BlocksDone,
+    density: f64,
+    sums: &mut ChunkSums,
+) {
     let mut block = [0; FRAME_LANES];
     let mut filled = 0;
-    for k in 0..chunk.grains.len() {
+    let n = chunk.grains.len();
+    let mut k = 0;
+    while k < n {
+        if blocks_done != 0 && blocks_done & (1 << (k / BLOCK_GRAINS)) != 0 {
+            k += BLOCK_GRAINS;
+            continue;
+        }
         let grain = &chunk.grains[k];
         if Frame::is_circle(grain, chunk.levels[k].level) {
             chunk.frames[k].write_circle(grain, density);
             sums.circle_frames += 1;
-            continue;
+        } else {
+            block[filled] = k;
+            filled += 1;
+            if filled == FRAME_LANES {
+                Frame::write_full_block(chunk.frames, chunk.grains, block, density);
+                filled = 0;
+            }
         }
-        block[filled] = k;
-        filled += 1;
-        if filled == FRAME_LANES {
-            Frame::write_full_block(chunk.frames, chunk.grains, block, density);
-            filled = 0;
-        }
+        k += 1;
     }
     for &k in &block[..filled] {
         chunk.frames[k] = Frame::of_grain(&chunk.grains[k], density);
@@ -411,6 +665,12 @@ fn write_frames(chunk: &mut GrainChunk<'_>, density: f64, sums: &mut ChunkSums) 
         *reach = frame.bounding_radius;
     }
 }
+
+/// The blocks of a chunk whose frames [`GrainPass::by_blocks`] wrote: bit `b` for its grains
+/// `4 b` to `4 b + 3`.
+type BlocksDone = u64;
+
+const _: () = assert!(GRAIN_CHUNK / BLOCK_GRAINS <= BlocksDone::BITS as usize);
 
 /// One chunk of the grain pass's per-grain arrays, all of the same grains.
 pub(super) struct GrainChunk<'a> {
@@ -583,6 +843,21 @@ impl ContactLoad {
     }
 }
 
+impl BlockLoads {
+    /// Puts a grain's load in lane `l`.
+    #[inline(always)]
+    fn set_lane(&mut self, l: usize, load: &ContactLoad) {
+        self.force[0].0[l] = load.force.x;
+        self.force[1].0[l] = load.force.y;
+        self.torque.0[l] = load.torque;
+        self.moment[0][0].0[l] = load.moment.x_axis.x;
+        self.moment[0][1].0[l] = load.moment.x_axis.y;
+        self.moment[1][0].0[l] = load.moment.y_axis.x;
+        self.moment[1][1].0[l] = load.moment.y_axis.y;
+        self.lost_area.0[l] = load.lost_area;
+    }
+}
+
 /// What every grain's update reads that depends on the parameters alone, computed once a
 /// chunk: some were divisions, and together some 20 instructions a grain-step.
 struct UpdateConstants {
@@ -618,6 +893,7 @@ struct GrainUpdate {
 /// `e1`: the grain's [principal direction](Grain::principal_direction) (read unless the grain
 /// is rigid).
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn advance_grain(
     params: &Parameters,
     dt: f64,
@@ -766,7 +1042,35 @@ fn freeze(grain: &mut Grain, level: ModelLevel) {
     }
 }
 
+/// What a block's update reads of the parameters, for a plain step of `dt`.
+fn block_constants(params: &Parameters, constants: &UpdateConstants, dt: f64) -> BlockConstants {
+    BlockConstants {
+        moduli: constants.moduli,
+        density: params.material.density,
+        dt,
+        gravity: constants.gravity,
+        deformation_mass_scale: params.deformation_mass_scale,
+        deformation_damping: params.deformation_damping,
+        k_alpha: params.k_alpha,
+        alpha_mass_scale: params.alpha_mass_scale,
+        wave_speed_squared: constants.wave_speed_squared,
+    }
+}
+
+/// [`check_grain`] of a grain a block's lanes flagged, out of line: the rare case.
+#[cold]
+#[inline(never)]
+fn check_suspect(
+    grain: &Grain,
+    wave_speed_squared: f64,
+    index: usize,
+    step: u64,
+) -> Result<(), Instability> {
+    check_grain(grain, wave_speed_squared, index, step)
+}
+
 /// The per-grain failures of SPEC §9.
+#[inline(always)]
 fn check_grain(
     grain: &Grain,
     wave_speed_squared: f64,
@@ -821,6 +1125,7 @@ fn check_grain(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DMat2;
 
     #[test]
     fn principal_directions_in_lanes_are_each_grains_own_bits() {
@@ -869,6 +1174,220 @@ mod tests {
             }
             assert!(n < 5 || deforming > 0);
         }
+    }
+
+    /// A value's bits, every NaN as one: IEEE leaves a NaN's sign and payload open, and a
+    /// vector instruction may give another NaN than its scalar twin (seen in the frame of an
+    /// inverted grain, which fails the step).
+    fn bits(x: f64) -> u64 {
+        if x.is_nan() {
+            f64::NAN.to_bits()
+        } else {
+            x.to_bits()
+        }
+    }
+
+    fn grain_bits(g: &Grain) -> [u64; 13] {
+        [
+            g.radius,
+            g.center.x,
+            g.center.y,
+            g.velocity.x,
+            g.velocity.y,
+            g.theta,
+            g.omega,
+            g.eps1,
+            g.eps1_rate,
+            g.eps2,
+            g.eps2_rate,
+            g.alpha,
+            g.alpha_rate,
+        ]
+        .map(bits)
+    }
+
+    fn frame_bits(f: &Frame) -> Vec<u64> {
+        let mut bits = vec![u64::from(f.circle)];
+        for x in [
+            f.center.x,
+            f.center.y,
+            f.bounding_radius,
+            f.mass,
+            f.velocity.x,
+            f.velocity.y,
+            f.omega,
+        ]
+        .into_iter()
+        .chain(f.map.to_cols_array())
+        .chain(f.velocity_gradient.to_cols_array())
+        {
+            bits.push(self::bits(x));
+        }
+        bits
+    }
+
+    fn stress_bits(s: &GrainStress) -> Vec<u64> {
+        let mut bits: Vec<u64> = s
+            .external
+            .iter()
+            .chain(&s.principal)
+            .chain([&s.lost_area])
+            .map(|&x| self::bits(x))
+            .collect();
+        bits.extend([u64::from(s.contacts), u64::from(s.wall_contacts)]);
+        bits
+    }
+
+    #[test]
+    fn a_block_gives_each_grain_the_one_grain_updates_bits() {
+        // Expectation: a block's lanes are four one-grain updates side by side (`advance_grain`
+        // at the full level, then `Frame::of_grain` of the updated grain): every field of the
+        // grains, their stress records, areas, elastic energies and next frames bit for bit,
+        // compressible and incompressible, with and without gravity, strain differences on
+        // both sides of k_alpha's threshold (zero included). A grain the one-grain checks fail
+        // is flagged for them.
+        use super::super::grain_block::{
+            BLOCK_GRAINS, BlockLoads, advance_full_block, blocks_available,
+        };
+        use crate::grain::constitutive::Material;
+        use crate::sample::unit_random;
+        use rand::SeedableRng;
+        if !blocks_available() {
+            eprintln!("no AVX here: the grain pass takes no blocks, nothing to compare");
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
+        let mut random = |lo: f64, hi: f64| lo + (hi - lo) * unit_random(&mut rng);
+        let mut flagged = 0;
+        for (case, (poisson, gravity)) in [
+            (0.5, DVec2::ZERO),
+            (0.3, DVec2::ZERO),
+            (0.5, DVec2::new(0.1, -9.8)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let material = Material {
+                young: 1.0,
+                poisson,
+                density: 1.3,
+            };
+            let mut params = Parameters::new(material, 1e-3);
+            params.gravity = gravity;
+            params.deformation_damping = 0.7;
+            params.k_alpha = 1e-3;
+            params.alpha_mass_scale = 2.0;
+            params.deformation_mass_scale = 3.0;
+            let constants = UpdateConstants::new(&params);
+            let block_constants = block_constants(&params, &constants, params.dt);
+            let density = material.density;
+            for trial in 0..300 {
+                let grains: [Grain; BLOCK_GRAINS] = std::array::from_fn(|l| {
+                    let eps1 = random(-0.3, 0.3);
+                    // Equal strains, a difference under k_alpha's threshold, or any.
+                    let eps2 = match (trial + l) % 4 {
+                        0 => eps1,
+                        1 => eps1 + random(-0.02, 0.02),
+                        _ => random(-0.3, 0.3),
+                    };
+                    Grain {
+                        radius: random(0.5, 1.5),
+                        center: DVec2::new(random(-10.0, 10.0), random(-10.0, 10.0)),
+                        velocity: DVec2::new(random(-0.1, 0.1), random(-0.1, 0.1)),
+                        theta: random(-20.0, 20.0),
+                        omega: random(-1.0, 1.0),
+                        eps1,
+                        eps1_rate: random(-0.1, 0.1),
+                        eps2,
+                        eps2_rate: random(-0.1, 0.1),
+                        alpha: random(-4.0, 4.0),
+                        alpha_rate: random(-1.0, 1.0),
+                    }
+                });
+                let mut grains = grains;
+                // Lanes the checks must catch: a NaN, an inverted strain, a runaway.
+                match trial {
+                    10 => grains[2].velocity.y = f64::NAN,
+                    11 => grains[1].eps2 = -1.5,
+                    12 => grains[3].velocity.x = 5.0,
+                    _ => {}
+                }
+                let loads: [ContactLoad; BLOCK_GRAINS] = std::array::from_fn(|l| ContactLoad {
+                    force: DVec2::new(random(-0.01, 0.01), random(-0.01, 0.01)),
+                    torque: random(-1e-3, 1e-3),
+                    moment: DMat2::from_cols(
+                        DVec2::new(random(-0.01, 0.01), random(-0.01, 0.01)),
+                        DVec2::new(random(-0.01, 0.01), random(-0.01, 0.01)),
+                    ),
+                    lost_area: if l == 0 { 0.0 } else { random(0.0, 0.1) },
+                    contacts: l as u32 + 2,
+                    wall_contacts: l as u32 % 2,
+                });
+                let directions = grains.map(|g| g.principal_direction());
+
+                let mut one_by_one = grains;
+                let updates: Vec<GrainUpdate> = (0..BLOCK_GRAINS)
+                    .map(|l| {
+                        advance_grain(
+                            &params,
+                            params.dt,
+                            1,
+                            &mut one_by_one[l],
+                            &mut GrainLevel::new(ModelLevel::Full),
+                            &loads[l],
+                            &constants,
+                            directions[l],
+                            l,
+                            7,
+                        )
+                    })
+                    .collect();
+
+                let mut block = grains;
+                let mut block_loads = BlockLoads::default();
+                for (l, load) in loads.iter().enumerate() {
+                    block_loads.set_lane(l, load);
+                }
+                let contacts = loads.map(|load| [load.contacts, load.wall_contacts]);
+                let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
+                let mut frames = [Frame::default(); BLOCK_GRAINS];
+                let outcome = advance_full_block(
+                    &mut block,
+                    &mut stresses,
+                    &mut frames,
+                    &block_loads,
+                    &contacts,
+                    &directions,
+                    &block_constants,
+                );
+                for l in 0..BLOCK_GRAINS {
+                    let at = format!("case {case}, trial {trial}, lane {l}");
+                    assert_eq!(grain_bits(&block[l]), grain_bits(&one_by_one[l]), "{at}");
+                    assert_eq!(
+                        stress_bits(&stresses[l]),
+                        stress_bits(&updates[l].stress),
+                        "{at}"
+                    );
+                    assert_eq!(bits(outcome.area.0[l]), bits(updates[l].area), "{at}");
+                    assert_eq!(
+                        bits(outcome.elastic_energy.0[l]),
+                        bits(updates[l].elastic_energy),
+                        "{at}"
+                    );
+                    let frame = Frame::of_grain(&one_by_one[l], density);
+                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");
+                    let suspect = outcome.suspect & (1 << l) != 0;
+                    if updates[l].result.is_err() {
+                        assert!(suspect, "{at}: a failed grain not flagged");
+                        flagged += 1;
+                    }
+                    if (10..=12).contains(&trial) {
+                        assert_eq!(suspect, updates[l].result.is_err(), "{at}");
+                    }
+                }
+            }
+        }
+        assert_eq!(flagged, 3 * 3, "each case's three failing grains");
     }
 
     #[test]

@@ -22,6 +22,7 @@
 //! was built. What only outputs read and the step's end state determines (the grains' kinetic
 //! energy and kinetic stress) is summed when asked ([`World::kinetic`]), in the same chunks.
 
+mod grain_block;
 mod grain_pass;
 pub mod instability;
 pub mod pairs;
@@ -187,6 +188,7 @@ fn affine_lanes_dispatch(angles: &BlockAngles, states: &AffineState<FrameLanes>)
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
+#[inline(never)]
 fn affine_lanes_avx(angles: &BlockAngles, states: &AffineState<FrameLanes>) -> AffineLanes {
     affine_lanes(angles, states)
 }
@@ -364,6 +366,9 @@ impl PairContact {
 
 /// Per-grain quantities of the last step, kept for output.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
+// Fields in this order, with no padding: the grain pass writes blocks of records from lanes
+// (`grain_block`).
+#[repr(C)]
 pub struct GrainStress {
     /// Love–Weber stress of the contact forces, global frame (xx, yy, xy), tension positive.
     pub external: [f64; 3],
@@ -624,6 +629,9 @@ pub struct World {
     /// it for [`World::kinetic`]).
     fast: Vec<bool>,
     last_step: LastStep,
+    /// Whether the grain pass may take chunks of full-level grains by blocks in lanes (see
+    /// [`grain_block`]); always, but for the tests that compare the two paths.
+    grain_blocks: bool,
 }
 
 /// The homogeneous deformation that maps the box with corners `from_lo`, `from_hi` (lower left,
@@ -704,6 +712,7 @@ impl World {
             cycle_substep: None,
             fast: Vec::new(),
             last_step: LastStep::None(KineticTotals::default()),
+            grain_blocks: true,
         };
         world.count_levels();
         world
@@ -1244,6 +1253,11 @@ impl World {
                 fast: &self.fast,
                 second,
             }),
+            // Full-level grains are in a world at that level or with adaptive levels.
+            blocks: self.grain_blocks
+                && cycle.is_none()
+                && (params.level == ModelLevel::Full || params.adaptive.is_some())
+                && grain_block::blocks_available(),
         };
         let chunk_sums: Vec<ChunkSums> = self
             .grains
@@ -1615,6 +1629,152 @@ mod tests {
             still.step().unwrap();
         }
         assert_ne!(state(&still), state(&carried));
+    }
+
+    #[test]
+    fn the_grain_pass_by_blocks_changes_no_bit() {
+        // Expectation: a block's lanes are its grains' one-grain updates (a unit test of
+        // grain_pass compares them), and the pass around them keeps every order: a world
+        // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
+        // stress records, totals, frames, the pair records), in a box squeezed with the affine
+        // carry, with friction, in a sheared periodic cell; and a step that fails reports the
+        // same first failure.
+        use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+        use crate::contact::friction::FrictionSettings;
+        use crate::integration::parameters::Friction;
+        if !grain_block::blocks_available() {
+            eprintln!("no AVX here: the grain pass takes no blocks, nothing to compare");
+            return;
+        }
+        let grain_bits = |w: &World| -> Vec<u64> {
+            w.grains
+                .iter()
+                .flat_map(|g| {
+                    [
+                        g.center.x,
+                        g.center.y,
+                        g.velocity.x,
+                        g.velocity.y,
+                        g.theta,
+                        g.omega,
+                        g.eps1,
+                        g.eps1_rate,
+                        g.eps2,
+                        g.eps2_rate,
+                        g.alpha,
+                        g.alpha_rate,
+                    ]
+                })
+                .map(f64::to_bits)
+                .collect()
+        };
+        for case in ["affine box", "friction", "periodic cell", "adaptive levels"] {
+            let mut world = crate::run::bench::dense_packing(603, 1.0);
+            assert!(world.params.level == ModelLevel::Full && world.params.adaptive.is_none());
+            for (w, v) in [
+                (LEFT, 1e-3),
+                (RIGHT, -1.5e-3),
+                (BOTTOM, 2e-3),
+                (TOP, -0.5e-3),
+            ] {
+                let axis = if w == LEFT || w == RIGHT {
+                    DVec2::X
+                } else {
+                    DVec2::Y
+                };
+                world.walls[w].velocity = axis * v;
+            }
+            match case {
+                "affine box" => world.affine_carry = true,
+                "friction" => {
+                    let settings = FrictionSettings {
+                        grains: 0.4,
+                        damping: 0.3,
+                        ..Default::default()
+                    };
+                    world.params.friction = Friction::new(&settings, &[0.3; 4]);
+                }
+                "periodic cell" => {
+                    world = world.with_periodic(PeriodicBoundary {
+                        shear_rate: 1e-3,
+                        ..Default::default()
+                    })
+                }
+                _ => {
+                    // Every grain starts at the full level, and many step down within a few
+                    // steps (some back up): chunks and blocks of mixed levels, frozen rates.
+                    let dt = world.params.dt;
+                    world.params.adaptive = Some(crate::integration::parameters::Adaptive {
+                        settings: crate::grain::adaptive::AdaptiveSettings {
+                            full_down: 5e-2,
+                            confirm: 2,
+                            dwell: 5,
+                            ..Default::default()
+                        },
+                        dt: [dt; 3],
+                        multi_rate: false,
+                    });
+                    let n = world.grains.len();
+                    world.set_levels(&vec![GrainLevel::new(ModelLevel::Full); n]);
+                }
+            }
+            let mut by_grain = world.clone();
+            by_grain.grain_blocks = false;
+            let mut by_block = world;
+            for step in 0..80 {
+                by_grain.step().unwrap();
+                by_block.step().unwrap();
+                let at = format!("{case}, step {step}");
+                // The first entry that differs, not two long lists.
+                fn same<T: PartialEq + std::fmt::Debug>(what: &str, at: &str, a: &[T], b: &[T]) {
+                    assert_eq!(a.len(), b.len(), "{at}: {what}");
+                    if let Some(k) = (0..a.len()).find(|&k| a[k] != b[k]) {
+                        panic!("{at}: {what}[{k}]: {:?} against {:?}", a[k], b[k]);
+                    }
+                }
+                same(
+                    "grain values",
+                    &at,
+                    &grain_bits(&by_block),
+                    &grain_bits(&by_grain),
+                );
+                same(
+                    "stresses",
+                    &at,
+                    &by_block.grain_stress,
+                    &by_grain.grain_stress,
+                );
+                assert_eq!(by_block.totals, by_grain.totals, "{at}");
+                same(
+                    "contacts",
+                    &at,
+                    &by_block.pair_contacts,
+                    &by_grain.pair_contacts,
+                );
+                let frames = |w: &World| w.frames.iter().map(frame_bits).collect::<Vec<_>>();
+                same("frames", &at, &frames(&by_block), &frames(&by_grain));
+                same("centres", &at, &by_block.centers, &by_grain.centers);
+                same("reaches", &at, &by_block.reach, &by_grain.reach);
+            }
+            if case == "adaptive levels" {
+                let counts = by_block.totals.level_counts;
+                assert!(counts[0] + counts[1] > 20 && counts[2] > 20, "{counts:?}");
+            }
+            // Two grains, in two blocks, fail the speed check: the first is reported.
+            for world in [&mut by_grain, &mut by_block] {
+                let wave_speed =
+                    (world.params.material.young / world.params.material.density).sqrt();
+                for g in [301, 306] {
+                    world.grains_mut()[g].velocity = DVec2::new(2.0 * wave_speed, 0.0);
+                }
+            }
+            let failure = by_grain.step().unwrap_err();
+            assert!(
+                matches!(failure, Instability::Runaway { grain: 301, .. }),
+                "{failure:?}"
+            );
+            assert_eq!(by_block.step().unwrap_err(), failure, "{case}");
+        }
     }
 
     /// The bits of what a frame holds for its grain: the first line, and the second where the
