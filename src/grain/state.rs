@@ -68,6 +68,26 @@ impl Grain {
         }
     }
 
+    /// Every field, in the record's order: the radius, the centre, the velocity, theta, omega,
+    /// eps1 and its rate, eps2 and its rate, alpha and its rate.
+    pub fn to_array(&self) -> [f64; 13] {
+        [
+            self.radius,
+            self.center.x,
+            self.center.y,
+            self.velocity.x,
+            self.velocity.y,
+            self.theta,
+            self.omega,
+            self.eps1,
+            self.eps1_rate,
+            self.eps2,
+            self.eps2_rate,
+            self.alpha,
+            self.alpha_rate,
+        ]
+    }
+
     /// Reference area `pi R^2`.
     #[inline]
     pub fn reference_area(&self) -> f64 {

@@ -260,39 +260,14 @@ mod avx {
     use std::arch::x86_64::*;
     use std::ops::{Add, Div, Mul, Neg, Sub};
 
-    // The transposes read a grain as thirteen consecutive `f64`s in this order.
+    // The transposes read a grain as thirteen `f64`s, a stress record as seven words and a
+    // frame as sixteen, without padding (`repr(C)`); which field each word is, the test
+    // `records_are_the_words_the_transposes_move` checks.
     const _: () = {
-        use std::mem::{offset_of, size_of};
+        use std::mem::size_of;
         assert!(size_of::<Grain>() == 13 * 8);
-        assert!(offset_of!(Grain, radius) == 0);
-        assert!(offset_of!(Grain, center) == 8);
-        assert!(offset_of!(Grain, velocity) == 24);
-        assert!(offset_of!(Grain, theta) == 40);
-        assert!(offset_of!(Grain, omega) == 48);
-        assert!(offset_of!(Grain, eps1) == 56);
-        assert!(offset_of!(Grain, eps1_rate) == 64);
-        assert!(offset_of!(Grain, eps2) == 72);
-        assert!(offset_of!(Grain, eps2_rate) == 80);
-        assert!(offset_of!(Grain, alpha) == 88);
-        assert!(offset_of!(Grain, alpha_rate) == 96);
-        // And a stress record as seven: the stresses, the lost area, the two counts.
         assert!(size_of::<GrainStress>() == 7 * 8);
-        assert!(offset_of!(GrainStress, external) == 0);
-        assert!(offset_of!(GrainStress, principal) == 24);
-        assert!(offset_of!(GrainStress, lost_area) == 40);
-        assert!(offset_of!(GrainStress, contacts) == 48);
-        assert!(offset_of!(GrainStress, wall_contacts) == 52);
-        // And a frame's two lines by fours: centre, bounding radius, mass; velocity, spin and
-        // the circle flag (a zero `f64` writes `false`); the map; the velocity gradient.
         assert!(size_of::<Frame>() == 16 * 8);
-        assert!(offset_of!(Frame, center) == 0);
-        assert!(offset_of!(Frame, bounding_radius) == 16);
-        assert!(offset_of!(Frame, mass) == 24);
-        assert!(offset_of!(Frame, velocity) == 32);
-        assert!(offset_of!(Frame, omega) == 48);
-        assert!(offset_of!(Frame, circle) == 56);
-        assert!(offset_of!(Frame, map) == 64);
-        assert!(offset_of!(Frame, velocity_gradient) == 96);
     };
 
     /// Four `f64` lanes in an AVX register, with [`Real`]'s arithmetic: the operations of
@@ -329,6 +304,22 @@ mod avx {
         }
     }
 
+    impl F64x4 {
+        /// `self` where `other` is a NaN or `self` compares `KEEP` (greater, for a maximum)
+        /// to it, else `other`: `Lanes`' `max` and `min`.
+        #[inline(always)]
+        fn unless_beaten<const KEEP: i32>(self, other: Self) -> Self {
+            // SAFETY: as above.
+            F64x4(unsafe {
+                let take_self = _mm256_or_pd(
+                    _mm256_cmp_pd::<_CMP_UNORD_Q>(other.0, other.0),
+                    _mm256_cmp_pd::<KEEP>(self.0, other.0),
+                );
+                _mm256_blendv_pd(other.0, self.0, take_self)
+            })
+        }
+    }
+
     impl Real for F64x4 {
         #[inline(always)]
         fn splat(value: f64) -> Self {
@@ -342,26 +333,11 @@ mod avx {
         }
         #[inline(always)]
         fn max(self, other: Self) -> Self {
-            // `self` where `other` is a NaN or `self > other`, else `other` (as `Lanes`).
-            // SAFETY: as above.
-            F64x4(unsafe {
-                let take_self = _mm256_or_pd(
-                    _mm256_cmp_pd::<_CMP_UNORD_Q>(other.0, other.0),
-                    _mm256_cmp_pd::<_CMP_GT_OQ>(self.0, other.0),
-                );
-                _mm256_blendv_pd(other.0, self.0, take_self)
-            })
+            self.unless_beaten::<_CMP_GT_OQ>(other)
         }
         #[inline(always)]
         fn min(self, other: Self) -> Self {
-            // SAFETY: as above.
-            F64x4(unsafe {
-                let take_self = _mm256_or_pd(
-                    _mm256_cmp_pd::<_CMP_UNORD_Q>(other.0, other.0),
-                    _mm256_cmp_pd::<_CMP_LT_OQ>(self.0, other.0),
-                );
-                _mm256_blendv_pd(other.0, self.0, take_self)
-            })
+            self.unless_beaten::<_CMP_LT_OQ>(other)
         }
         #[inline(always)]
         fn if_greater(self, than: Self, then: Self, otherwise: Self) -> Self {
@@ -583,5 +559,76 @@ mod avx {
         store(lanes.area, &mut outcome.area);
         store(lanes.elastic_energy, &mut outcome.elastic_energy);
         outcome
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DMat2;
+
+    /// A record's words, as the transposes read and write them.
+    fn words<T, const N: usize>(record: &T) -> [u64; N] {
+        assert_eq!(std::mem::size_of::<T>(), 8 * N);
+        // SAFETY: `T` is `N` words long (asserted just above), and every record here is
+        // plain data whose padding, if any, the caller's values have written.
+        unsafe { std::ptr::read_unaligned((record as *const T).cast::<[u64; N]>()) }
+    }
+
+    #[test]
+    fn records_are_the_words_the_transposes_move() {
+        // Expectation: the fields in the words the block function loads and stores, in its
+        // order: a grain as `Grain::to_array`; a stress record as the three stresses, the two
+        // principal stresses, the lost area, then the two counts in one word; a frame as the
+        // centre, bounding radius, mass, velocity, spin, the circle flag (the low byte of a
+        // word whose other bytes are padding), the map and the velocity gradient by columns.
+        let value = |k: usize| 1.0 + k as f64;
+        let grain = Grain {
+            radius: value(0),
+            center: DVec2::new(value(1), value(2)),
+            velocity: DVec2::new(value(3), value(4)),
+            theta: value(5),
+            omega: value(6),
+            eps1: value(7),
+            eps1_rate: value(8),
+            eps2: value(9),
+            eps2_rate: value(10),
+            alpha: value(11),
+            alpha_rate: value(12),
+        };
+        assert_eq!(grain.to_array(), std::array::from_fn(value));
+        assert_eq!(words::<_, 13>(&grain), grain.to_array().map(f64::to_bits));
+
+        let stress = GrainStress {
+            external: [value(0), value(1), value(2)],
+            principal: [value(3), value(4)],
+            lost_area: value(5),
+            contacts: 7,
+            wall_contacts: 9,
+        };
+        let stress_words = words::<_, 7>(&stress);
+        assert_eq!(
+            stress_words[..6],
+            std::array::from_fn::<_, 6, _>(|k| value(k).to_bits())
+        );
+        assert_eq!(stress_words[6], 7 | 9 << 32);
+
+        // Every byte written first, so that the padding after the flag reads as zeros.
+        // SAFETY: a frame is plain data, all zeros a valid one (`circle: false`).
+        let mut frame: Frame = unsafe { std::mem::zeroed() };
+        frame.center = DVec2::new(value(0), value(1));
+        frame.bounding_radius = value(2);
+        frame.mass = value(3);
+        frame.velocity = DVec2::new(value(4), value(5));
+        frame.omega = value(6);
+        frame.circle = true;
+        frame.map = DMat2::from_cols_array(&[value(8), value(9), value(10), value(11)]);
+        frame.velocity_gradient =
+            DMat2::from_cols_array(&[value(12), value(13), value(14), value(15)]);
+        let frame_words = words::<_, 16>(&frame);
+        for (k, &word) in frame_words.iter().enumerate() {
+            let expected = if k == 7 { 1 } else { value(k).to_bits() };
+            assert_eq!(word, expected, "word {k}");
+        }
     }
 }

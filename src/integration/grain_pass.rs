@@ -229,12 +229,7 @@ impl GrainPass<'_> {
         }
         let dt = turn.dt(self.dt);
         let tallied = turn.tallied();
-        let mut load = if self.frictional_pairs {
-            self.pair_load::<true>(g, frame)
-        } else {
-            self.pair_load::<false>(g, frame)
-        };
-        self.add_wall_contacts(
+        let load = self.contact_load(
             g,
             frame,
             turn,
@@ -242,7 +237,6 @@ impl GrainPass<'_> {
             chunk_walls,
             near_wall,
             wall_history,
-            &mut load,
             &mut sums.totals,
             &mut sums.failure,
         );
@@ -331,12 +325,7 @@ impl GrainPass<'_> {
             for (l, lane_contacts) in contacts.iter_mut().enumerate() {
                 let (k, g) = (start + l, first + start + l);
                 let frame = &chunk.frames[k];
-                let mut load = if self.frictional_pairs {
-                    self.pair_load::<true>(g, frame)
-                } else {
-                    self.pair_load::<false>(g, frame)
-                };
-                self.add_wall_contacts(
+                let load = self.contact_load(
                     g,
                     frame,
                     Turn::Plain,
@@ -344,7 +333,6 @@ impl GrainPass<'_> {
                     chunk_walls,
                     near_wall,
                     &mut chunk.wall_histories[k],
-                    &mut load,
                     &mut sums.totals,
                     &mut wall_failure,
                 );
@@ -413,12 +401,13 @@ impl GrainPass<'_> {
         done
     }
 
-    /// Adds to `load` the contacts of grain `g` (`frame`: the grain at the start of the step)
-    /// with the walls `walls` (those of them `near_wall` says its chunk reaches), their wall
-    /// forces and counts to `totals`; its first failure goes to `failure`.
+    /// The contact load of grain `g` (`frame`: the grain at the start of the step): its pairs'
+    /// forces, then those of the walls `walls` (of them, those `near_wall` says its chunk
+    /// reaches). The walls' forces and counts go to `totals` too, and the grain's first
+    /// failure to `failure`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn add_wall_contacts(
+    fn contact_load(
         &self,
         g: usize,
         frame: &Frame,
@@ -427,10 +416,14 @@ impl GrainPass<'_> {
         walls: &[Wall],
         near_wall: &[bool; MAX_WALLS],
         wall_history: &mut [f64; MAX_WALLS],
-        load: &mut ContactLoad,
         totals: &mut StepTotals,
         failure: &mut Option<Instability>,
-    ) {
+    ) -> ContactLoad {
+        let mut load = if self.frictional_pairs {
+            self.pair_load::<true>(g, frame)
+        } else {
+            self.pair_load::<false>(g, frame)
+        };
         let (params, step, tallied) = (self.params, self.step, turn.tallied());
         for (w, wall) in walls.iter().enumerate() {
             // A contact that is open this step drops its history. A wall without friction
@@ -510,6 +503,7 @@ impl GrainPass<'_> {
                 },
             }
         }
+        load
     }
 
     /// Moves an updated grain with its box: the affine carry of a box of walls, or a periodic
@@ -1188,22 +1182,7 @@ mod tests {
     }
 
     fn grain_bits(g: &Grain) -> [u64; 13] {
-        [
-            g.radius,
-            g.center.x,
-            g.center.y,
-            g.velocity.x,
-            g.velocity.y,
-            g.theta,
-            g.omega,
-            g.eps1,
-            g.eps1_rate,
-            g.eps2,
-            g.eps2_rate,
-            g.alpha,
-            g.alpha_rate,
-        ]
-        .map(bits)
+        g.to_array().map(bits)
     }
 
     fn frame_bits(f: &Frame) -> Vec<u64> {

@@ -1574,30 +1574,33 @@ mod tests {
         }
     }
 
+    /// The bench's dense packing of about `grains` grains, its walls moving in at four speeds.
+    fn squeezed_packing(grains: usize) -> World {
+        use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
+        let mut world = crate::run::bench::dense_packing(grains, 1.0);
+        for (w, v) in [
+            (LEFT, 1e-3),
+            (RIGHT, -1.5e-3),
+            (BOTTOM, 2e-3),
+            (TOP, -0.5e-3),
+        ] {
+            let axis = if w == LEFT || w == RIGHT {
+                DVec2::X
+            } else {
+                DVec2::Y
+            };
+            world.walls[w].velocity = axis * v;
+        }
+        world
+    }
+
     #[test]
     fn the_carry_inside_the_step_is_the_remap_after_it_bit_for_bit() {
         // Expectation: the affine carry that the grain pass applies to each grain is the map
         // the run loop applied after the step (from the box before the walls' move to the box
         // after it), so an affine run keeps its bits; the neighbour list's reference centres
         // follow alike (the rebuild decisions, hence the later steps, agree too).
-        use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
-        let squeezed = || {
-            let mut world = crate::run::bench::dense_packing(400, 1.0);
-            for (w, v) in [
-                (LEFT, 1e-3),
-                (RIGHT, -1.5e-3),
-                (BOTTOM, 2e-3),
-                (TOP, -0.5e-3),
-            ] {
-                let axis = if w == LEFT || w == RIGHT {
-                    DVec2::X
-                } else {
-                    DVec2::Y
-                };
-                world.walls[w].velocity = axis * v;
-            }
-            world
-        };
+        let squeezed = || squeezed_packing(400);
         let world = squeezed();
         let mut carried = world.clone();
         carried.affine_carry = true;
@@ -1639,7 +1642,6 @@ mod tests {
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
         // carry, with friction, in a sheared periodic cell; and a step that fails reports the
         // same first failure.
-        use crate::boundary::walls::{BOTTOM, LEFT, RIGHT, TOP};
         use crate::contact::friction::FrictionSettings;
         use crate::integration::parameters::Friction;
         if !grain_block::blocks_available() {
@@ -1649,41 +1651,13 @@ mod tests {
         let grain_bits = |w: &World| -> Vec<u64> {
             w.grains
                 .iter()
-                .flat_map(|g| {
-                    [
-                        g.center.x,
-                        g.center.y,
-                        g.velocity.x,
-                        g.velocity.y,
-                        g.theta,
-                        g.omega,
-                        g.eps1,
-                        g.eps1_rate,
-                        g.eps2,
-                        g.eps2_rate,
-                        g.alpha,
-                        g.alpha_rate,
-                    ]
-                })
+                .flat_map(Grain::to_array)
                 .map(f64::to_bits)
                 .collect()
         };
         for case in ["affine box", "friction", "periodic cell", "adaptive levels"] {
-            let mut world = crate::run::bench::dense_packing(603, 1.0);
+            let mut world = squeezed_packing(603);
             assert!(world.params.level == ModelLevel::Full && world.params.adaptive.is_none());
-            for (w, v) in [
-                (LEFT, 1e-3),
-                (RIGHT, -1.5e-3),
-                (BOTTOM, 2e-3),
-                (TOP, -0.5e-3),
-            ] {
-                let axis = if w == LEFT || w == RIGHT {
-                    DVec2::X
-                } else {
-                    DVec2::Y
-                };
-                world.walls[w].velocity = axis * v;
-            }
             match case {
                 "affine box" => world.affine_carry = true,
                 "friction" => {

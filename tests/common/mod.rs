@@ -123,26 +123,7 @@ pub fn checkpointed(out: &Path, every: u64) -> RunOptions {
 
 /// Every degree of freedom of every grain, as bits: equal means bitwise identical.
 pub fn grain_bits(g: &[Grain]) -> Vec<[u64; 13]> {
-    g.iter()
-        .map(|g| {
-            [
-                g.radius,
-                g.center.x,
-                g.center.y,
-                g.velocity.x,
-                g.velocity.y,
-                g.theta,
-                g.omega,
-                g.eps1,
-                g.eps1_rate,
-                g.eps2,
-                g.eps2_rate,
-                g.alpha,
-                g.alpha_rate,
-            ]
-            .map(f64::to_bits)
-        })
-        .collect()
+    g.iter().map(|g| g.to_array().map(f64::to_bits)).collect()
 }
 
 /// Asserts that two finished runs wrote the same `macro.csv` and `grains.csv`, byte for byte,
