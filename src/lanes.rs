@@ -180,6 +180,7 @@ mod tests {
             x.sqrt().0,
             x.max(y).0,
             x.min(y).0,
+            x.if_greater(y, x, y).0,
         ];
         for l in 0..4 {
             let scalar = [
@@ -191,6 +192,7 @@ mod tests {
                 a[l].sqrt(),
                 Real::max(a[l], b[l]),
                 Real::min(a[l], b[l]),
+                Real::if_greater(a[l], b[l], a[l], b[l]),
             ];
             for (lane, one) in lanes.iter().zip(scalar) {
                 // NaN payloads are not part of IEEE's results; a NaN must stay a NaN.

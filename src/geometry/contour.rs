@@ -11,6 +11,7 @@
 //! does a segment leave the polygon" are answered exactly there, with a table of the N-gon.
 
 use super::{affine, angle};
+use crate::lanes::Real;
 use glam::{DMat2, DVec2};
 
 /// The unit regular polygon shared by every grain of a run: node directions and edge normals.
@@ -374,10 +375,12 @@ impl GrainShape {
     }
 
     /// [`GrainShape::bounding_radius`] of a grain of reference radius `radius` and strains
-    /// `eps1`, `eps2`.
+    /// `eps1`, `eps2`: of one grain, or of lanes of grains (the grain pass's blocks). Over
+    /// `f64` it gives `f64::max`'s bits: the two maxima differ at most in a zero's sign, which
+    /// `1 +` erases.
     #[inline(always)]
-    pub fn bounding_radius_of(radius: f64, eps1: f64, eps2: f64) -> f64 {
-        radius * (1.0 + eps1.max(eps2))
+    pub fn bounding_radius_of<T: Real>(radius: T, eps1: T, eps2: T) -> T {
+        radius * (T::splat(1.0) + eps1.max(eps2))
     }
 
     /// `(A R)^-1`: current coordinates (relative to the centre) to reference coordinates.

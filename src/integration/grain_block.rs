@@ -20,12 +20,12 @@
 //! was 138 instructions a grain against 94: the compiler split its lanes into scalars and
 //! rebuilt them with shuffles.
 
-use super::{BlockAngles, Frame, GrainStress};
+use super::grain_pass::UpdateConstants;
+use super::{BlockAngles, Frame, GrainStress, Parameters};
+use crate::geometry::GrainShape;
 use crate::geometry::affine::AffineState;
 use crate::grain::Grain;
-use crate::grain::constitutive::{
-    Moduli, incompressible_strains, principal_stress, strain_energy_density,
-};
+use crate::grain::constitutive::{incompressible_strains, principal_stress, strain_energy_density};
 use crate::lanes::{Lanes, Real};
 use glam::DVec2;
 use std::f64::consts::PI;
@@ -47,19 +47,12 @@ pub(super) struct BlockLoads {
 }
 
 /// What the update reads besides the grains and their loads, the same for every block of a
-/// pass.
+/// pass: the parameters, the grain pass's constants derived from them, and the time step.
 #[derive(Clone, Copy)]
-pub(super) struct BlockConstants {
-    pub moduli: Moduli,
-    pub density: f64,
+pub(super) struct BlockConstants<'a> {
+    pub params: &'a Parameters,
+    pub update: &'a UpdateConstants,
     pub dt: f64,
-    pub gravity: Option<DVec2>,
-    pub deformation_mass_scale: f64,
-    pub deformation_damping: f64,
-    pub k_alpha: f64,
-    pub alpha_mass_scale: f64,
-    /// `E / rho` (see the grain pass's `check_grain`).
-    pub wave_speed_squared: f64,
 }
 
 /// What a block's update gives besides the grains' new states and stress records: each
@@ -102,7 +95,7 @@ pub(super) fn advance_full_block(
     loads: &BlockLoads,
     contacts: &[[u32; 2]; BLOCK_GRAINS],
     e1: &[DVec2],
-    constants: &BlockConstants,
+    constants: &BlockConstants<'_>,
 ) -> BlockOutcome {
     assert!(
         grains.len() == BLOCK_GRAINS
@@ -165,12 +158,13 @@ fn advance_lanes<T: Real>(
     dofs: &mut DofLanes<T>,
     load: &LoadLanes<T>,
     e1: [T; 2],
-    constants: &BlockConstants,
+    constants: &BlockConstants<'_>,
 ) -> OutcomeLanes<T> {
+    let (params, update) = (constants.params, constants.update);
     let splat = T::splat;
     let (one, half) = (splat(1.0), splat(0.5));
     let dt = splat(constants.dt);
-    let density = splat(constants.density);
+    let density = splat(params.material.density);
     let radius = dofs.radius;
     // `Grain::reference_area`: PI R R.
     let reference_area = splat(PI) * radius * radius;
@@ -190,7 +184,7 @@ fn advance_lanes<T: Real>(
     let dot = |a: [T; 2], b: [T; 2]| a[0] * b[0] + a[1] * b[1];
     let on_e2 = apply(e2);
     let (ext11, ext22, ext12) = (dot(e1, apply(e1)), dot(e2, on_e2), dot(e1, on_e2));
-    let moduli = &constants.moduli;
+    let moduli = &update.moduli;
     let (sigma1, sigma2) = principal_stress(moduli, dofs.eps1, dofs.eps2, lost_fraction);
     let elastic_energy =
         reference_area * strain_energy_density(moduli, dofs.eps1, dofs.eps2, lost_fraction);
@@ -201,7 +195,7 @@ fn advance_lanes<T: Real>(
     for axis in 0..2 {
         dofs.velocity[axis] = dofs.velocity[axis] + load.force[axis] * force_dt;
     }
-    if let Some(gravity) = constants.gravity {
+    if let Some(gravity) = update.gravity {
         for (axis, g) in gravity.to_array().into_iter().enumerate() {
             dofs.velocity[axis] = dofs.velocity[axis] + splat(g) * dt;
         }
@@ -216,15 +210,15 @@ fn advance_lanes<T: Real>(
 
     // Deformation at the full level.
     let inv_modal_mass =
-        splat(4.0) / (density * radius * radius * splat(constants.deformation_mass_scale));
-    let damping = splat(constants.deformation_damping);
+        splat(4.0) / (density * radius * radius * splat(params.deformation_mass_scale));
+    let damping = splat(params.deformation_damping);
     let (s11, s22) = (ext11 - sigma1, ext22 - sigma2);
     dofs.eps1_rate = dofs.eps1_rate + (inv_modal_mass * s11 - damping * dofs.eps1_rate) * dt;
     dofs.eps2_rate = dofs.eps2_rate + (inv_modal_mass * s22 - damping * dofs.eps2_rate) * dt;
     let difference = dofs.eps1 - dofs.eps2;
     let alpha_force_acc = (splat(2.0) * difference * difference).if_greater(
-        splat(constants.k_alpha),
-        inv_modal_mass * ext12 / (difference * splat(constants.alpha_mass_scale)),
+        splat(params.k_alpha),
+        inv_modal_mass * ext12 / (difference * splat(params.alpha_mass_scale)),
         splat(0.0),
     );
     dofs.alpha_rate = dofs.alpha_rate + (alpha_force_acc - damping * dofs.alpha_rate) * dt;
@@ -390,7 +384,7 @@ mod avx {
         loads: &BlockLoads,
         contacts: &[[u32; 2]; BLOCK_GRAINS],
         e1: &[DVec2],
-        constants: &BlockConstants,
+        constants: &BlockConstants<'_>,
     ) -> BlockOutcome {
         let base = grains.as_mut_ptr().cast::<f64>();
         // Grain `l`'s `f64`s 4q to 4q + 3 (the layout asserted above).
@@ -476,7 +470,7 @@ mod avx {
         let speed_squared = d.velocity[0] * d.velocity[0] + d.velocity[1] * d.velocity[1];
         let runaway = _mm256_cmp_pd::<_CMP_GT_OQ>(
             speed_squared.0,
-            _mm256_set1_pd(constants.wave_speed_squared),
+            _mm256_set1_pd(constants.update.wave_speed_squared),
         );
         let mut outcome = BlockOutcome {
             suspect: _mm256_movemask_pd(_mm256_or_pd(_mm256_or_pd(not_finite, inverted), runaway))
@@ -523,8 +517,7 @@ mod avx {
         store(d.omega, &mut states.omega);
         store(d.radius, &mut states.radius);
         let (maps, gradients) = super::super::affine_lanes_avx(&angles, &states);
-        // `GrainShape::bounding_radius_of`: R (1 + max(eps1, eps2)).
-        let bounding_radius = d.radius * (F64x4::splat(1.0) + d.eps1.max(d.eps2));
+        let bounding_radius = GrainShape::bounding_radius_of(d.radius, d.eps1, d.eps2);
         let matrix = |m: &crate::geometry::affine::Mat2<GrainLanes>| {
             transpose([
                 load(&m.x_axis[0]).0,

@@ -288,7 +288,11 @@ impl GrainPass<'_> {
     ) -> BlocksDone {
         let params = self.params;
         let density = params.material.density;
-        let block_constants = block_constants(params, constants, self.dt);
+        let block_constants = BlockConstants {
+            params,
+            update: constants,
+            dt: self.dt,
+        };
         let n = chunk.grains.len();
         let mut done = 0;
         for start in (0..n).step_by(BLOCK_GRAINS) {
@@ -854,13 +858,13 @@ impl BlockLoads {
 
 /// What every grain's update reads that depends on the parameters alone, computed once a
 /// chunk: some were divisions, and together some 20 instructions a grain-step.
-struct UpdateConstants {
-    moduli: Moduli,
+pub(super) struct UpdateConstants {
+    pub moduli: Moduli,
     /// `E / rho`, the square of the elastic wave speed (see [`check_grain`]).
-    wave_speed_squared: f64,
+    pub wave_speed_squared: f64,
     /// `1 / E`, the scale of the adaptive level's stresses.
-    inv_young: f64,
-    gravity: Option<DVec2>,
+    pub inv_young: f64,
+    pub gravity: Option<DVec2>,
 }
 
 impl UpdateConstants {
@@ -1036,21 +1040,6 @@ fn freeze(grain: &mut Grain, level: ModelLevel) {
     }
 }
 
-/// What a block's update reads of the parameters, for a plain step of `dt`.
-fn block_constants(params: &Parameters, constants: &UpdateConstants, dt: f64) -> BlockConstants {
-    BlockConstants {
-        moduli: constants.moduli,
-        density: params.material.density,
-        dt,
-        gravity: constants.gravity,
-        deformation_mass_scale: params.deformation_mass_scale,
-        deformation_damping: params.deformation_damping,
-        k_alpha: params.k_alpha,
-        alpha_mass_scale: params.alpha_mass_scale,
-        wave_speed_squared: constants.wave_speed_squared,
-    }
-}
-
 /// [`check_grain`] of a grain a block's lanes flagged, out of line: the rare case.
 #[cold]
 #[inline(never)]
@@ -1119,7 +1108,6 @@ fn check_grain(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DMat2;
 
     #[test]
     fn principal_directions_in_lanes_are_each_grains_own_bits() {
@@ -1258,7 +1246,11 @@ mod tests {
             params.alpha_mass_scale = 2.0;
             params.deformation_mass_scale = 3.0;
             let constants = UpdateConstants::new(&params);
-            let block_constants = block_constants(&params, &constants, params.dt);
+            let block_constants = BlockConstants {
+                params: &params,
+                update: &constants,
+                dt: params.dt,
+            };
             let density = material.density;
             for trial in 0..300 {
                 let grains: [Grain; BLOCK_GRAINS] = std::array::from_fn(|l| {

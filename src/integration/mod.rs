@@ -1640,8 +1640,8 @@ mod tests {
         // grain_pass compares them), and the pass around them keeps every order: a world
         // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
-        // carry, with friction, in a sheared periodic cell; and a step that fails reports the
-        // same first failure.
+        // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down;
+        // and a step that fails reports the same first failure.
         use crate::contact::friction::FrictionSettings;
         use crate::integration::parameters::Friction;
         if !grain_block::blocks_available() {
