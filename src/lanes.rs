@@ -160,6 +160,34 @@ impl<const N: usize> Real for Lanes<N> {
     }
 }
 
+/// Moving records into lanes and back with AVX registers.
+#[cfg(target_arch = "x86_64")]
+pub mod avx {
+    use std::arch::x86_64::*;
+
+    /// Rows to columns, four `f64`s each: `out[c][r] = rows[r][c]`. Four records of four words
+    /// become four lanes of a field each, and back (eight shuffles).
+    ///
+    /// # Safety
+    /// The processor must have AVX (call it from a function that enables it).
+    #[inline(always)]
+    pub unsafe fn transpose(rows: [__m256d; 4]) -> [__m256d; 4] {
+        // SAFETY: the caller's processor has AVX.
+        unsafe {
+            let t0 = _mm256_unpacklo_pd(rows[0], rows[1]);
+            let t1 = _mm256_unpackhi_pd(rows[0], rows[1]);
+            let t2 = _mm256_unpacklo_pd(rows[2], rows[3]);
+            let t3 = _mm256_unpackhi_pd(rows[2], rows[3]);
+            [
+                _mm256_permute2f128_pd(t0, t2, 0x20),
+                _mm256_permute2f128_pd(t1, t3, 0x20),
+                _mm256_permute2f128_pd(t0, t2, 0x31),
+                _mm256_permute2f128_pd(t1, t3, 0x31),
+            ]
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -117,6 +117,19 @@ impl BlockContacts {
         (&self.point, &self.normal, &self.length, &self.normal_gap)
     }
 
+    /// Whether every lane is on the common path.
+    #[inline(always)]
+    pub fn all_on_path(&self) -> bool {
+        self.on_path == (1 << BLOCK) - 1
+    }
+
+    /// The lanes' cap areas (of the pairs' first grains, of their second grains) and next
+    /// hints, as the kernel left them (see [`contact_lanes`](Self::contact_lanes)).
+    #[inline(always)]
+    pub fn cap_and_hint_lanes(&self) -> (&[f64; BLOCK], &[f64; BLOCK], &[PairHint; BLOCK]) {
+        (&self.cap_area_i, &self.cap_area_j, &self.hint)
+    }
+
     /// Lane `l`'s contact and next hint, `None` off the path.
     #[inline(always)]
     pub fn lane(&self, l: usize) -> LaneContact {

@@ -252,6 +252,7 @@ mod avx {
     // is compiled for AVX and called only where the processor has it.
     use super::*;
     use std::arch::x86_64::*;
+    use crate::lanes::avx::transpose;
     use std::ops::{Add, Div, Mul, Neg, Sub};
 
     // The transposes read a grain as thirteen `f64`s, a stress record as seven words and a
@@ -354,21 +355,6 @@ mod avx {
     #[inline(always)]
     unsafe fn store(v: F64x4, lanes: &mut GrainLanes) {
         _mm256_store_pd(lanes.0.as_mut_ptr(), v.0)
-    }
-
-    /// Rows to columns: `out[f][l] = rows[l][f]`.
-    #[inline(always)]
-    unsafe fn transpose(rows: [__m256d; 4]) -> [__m256d; 4] {
-        let t0 = _mm256_unpacklo_pd(rows[0], rows[1]);
-        let t1 = _mm256_unpackhi_pd(rows[0], rows[1]);
-        let t2 = _mm256_unpacklo_pd(rows[2], rows[3]);
-        let t3 = _mm256_unpackhi_pd(rows[2], rows[3]);
-        [
-            _mm256_permute2f128_pd(t0, t2, 0x20),
-            _mm256_permute2f128_pd(t1, t3, 0x20),
-            _mm256_permute2f128_pd(t0, t2, 0x31),
-            _mm256_permute2f128_pd(t1, t3, 0x31),
-        ]
     }
 
     /// See [`super::advance_full_block`].

@@ -332,6 +332,17 @@ pub struct PairContact {
     pub cap_area_second: f64,
 }
 
+// The pair pass writes a block's records as two rows of four words each (`PolygonsAhead::
+// write_records_avx`): normal, force, tangential force; point, cap areas.
+const _: () = {
+    use std::mem::{offset_of, size_of};
+    assert!(size_of::<DVec2>() == 16 && size_of::<PairContact>() == 64);
+    assert!(offset_of!(PairContact, normal) == 0 && offset_of!(PairContact, force) == 16);
+    assert!(offset_of!(PairContact, tangential_force) == 24);
+    assert!(offset_of!(PairContact, point) == 32 && offset_of!(PairContact, cap_area_first) == 48);
+    assert!(offset_of!(PairContact, cap_area_second) == 56);
+};
+
 impl PairContact {
     /// The contact force on the pair's first grain (on the second: its opposite).
     #[inline]

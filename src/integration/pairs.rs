@@ -196,6 +196,23 @@ impl<'a> PairPass<'a> {
                 } else {
                     None
                 };
+                // The common case of a dense packing: the block holds this pair and the
+                // next three, all contacts of the common path, which (without friction or a
+                // cell) leave nothing for the sums; their records are written at once.
+                if !FRICTIONAL
+                    && self.periodic.is_none()
+                    && lane == Some(0)
+                    && polygons.holds_contacts_from(k)
+                {
+                    let block = k..k + BLOCK;
+                    polygons.record_block(
+                        &mut states[block.clone()],
+                        &mut actives[block.clone()],
+                        &mut records[block],
+                    );
+                    k += BLOCK;
+                    continue;
+                }
                 let (state, active, record) = (&mut states[k], &mut actives[k], &mut records[k]);
                 match lane {
                     Some(lane) => self.polygon_lane::<FRICTIONAL>(
@@ -641,6 +658,95 @@ impl<'a> PolygonsAhead<'a> {
         None
     }
 
+    /// Whether the last block holds the chunk's pairs `k..k + BLOCK`, each one's contact from
+    /// the common path and its law in its domain: what [`record_block`](Self::record_block)
+    /// writes.
+    #[inline(always)]
+    fn holds_contacts_from(&self, k: usize) -> bool {
+        let forces = &self.forces;
+        // The block's pairs increase from its first.
+        self.filled == BLOCK
+            && self.pairs[0] == k
+            && self.pairs[BLOCK - 1] == k + BLOCK - 1
+            && self.results.all_on_path()
+            && (0..BLOCK)
+                .all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
+    }
+
+    /// Writes the states, flags and records of the block's pairs, where
+    /// [`holds_contacts_from`](Self::holds_contacts_from) says that they are its contacts, as
+    /// [`PairPass::record`] writes each one's without friction: the contact with its normal
+    /// force, no tangential force, and the hint and length in the state. Takes every lane.
+    #[inline(always)]
+    fn record_block(
+        &mut self,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) {
+        let (states, actives, records): (
+            &mut [PairState; BLOCK],
+            &mut [bool; BLOCK],
+            &mut [PairContact; BLOCK],
+        ) = (
+            states.try_into().expect("a block's states"),
+            actives.try_into().expect("a block's flags"),
+            records.try_into().expect("a block's records"),
+        );
+        // SAFETY: blocks are computed only where the processor has AVX (`table` is set only
+        // there: `new`).
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            self.write_records_avx(records)
+        };
+        let (_, _, length, _) = self.results.contact_lanes();
+        let (_, _, hints) = self.results.cap_and_hint_lanes();
+        for l in 0..BLOCK {
+            states[l] = PairState {
+                hint: hints[l],
+                tangential_history: TangentialResponse::default().history,
+                contact_length: length[l],
+            };
+            actives[l] = true;
+        }
+        self.taken = BLOCK;
+    }
+
+    /// The records of [`record_block`](Self::record_block): the lanes' fields as rows of
+    /// four words, transposed into the records' two halves.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn write_records_avx(&self, records: &mut [PairContact; BLOCK]) {
+        use crate::lanes::avx::transpose;
+        use std::arch::x86_64::*;
+        let (point, normal, _, _) = self.results.contact_lanes();
+        let (cap_area_i, cap_area_j, _) = self.results.cap_and_hint_lanes();
+        // SAFETY: every load reads four initialised f64s, and every store writes the first or
+        // second half of a record: eight f64s, 64-byte aligned, in the order asserted
+        // beside `PairContact`.
+        unsafe {
+            let load = |lanes: &[f64; BLOCK]| _mm256_loadu_pd(lanes.as_ptr());
+            let tangential_force = _mm256_set1_pd(TangentialResponse::default().force);
+            let heads = transpose([
+                load(&normal[0]),
+                load(&normal[1]),
+                load(&self.forces.force.0),
+                tangential_force,
+            ]);
+            let tails = transpose([
+                load(&point[0]),
+                load(&point[1]),
+                load(cap_area_i),
+                load(cap_area_j),
+            ]);
+            for (record, (head, tail)) in records.iter_mut().zip(heads.into_iter().zip(tails)) {
+                let words = (record as *mut PairContact).cast::<f64>();
+                _mm256_store_pd(words, head);
+                _mm256_store_pd(words.add(4), tail);
+            }
+        }
+    }
+
     /// The lane that holds the chunk's pair `k` (not in the last block), after computing a
     /// block from `k` on where `k` is on the common path; `None` leaves the pair to the
     /// one-pair path.
@@ -732,22 +838,12 @@ impl PolygonEnds {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn set_avx(&mut self, frames: [&Frame; BLOCK]) {
+        use crate::lanes::avx::transpose;
         use std::arch::x86_64::*;
         // SAFETY: each load reads an array of four f64s (a frame's centre, bounding radius
         // and mass, `Frame::lane_shape`; its velocity gradient's columns) or a `repr(C)`
         // `DVec2`, all initialised.
         unsafe {
-            // Four rows of four f64s, as four columns.
-            let transpose = |[a0, a1, a2, a3]: [__m256d; 4]| {
-                let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
-                let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
-                [
-                    _mm256_permute2f128_pd(t0, t2, 0x20),
-                    _mm256_permute2f128_pd(t1, t3, 0x20),
-                    _mm256_permute2f128_pd(t0, t2, 0x31),
-                    _mm256_permute2f128_pd(t1, t3, 0x31),
-                ]
-            };
             // Not `array::map`: its closure is not inlined here, and its calls cost more than
             // the loads.
             let first_line =
