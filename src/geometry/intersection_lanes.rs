@@ -618,10 +618,10 @@ mod avx {
             sub_i(ones_i(self.on), ones_i(self.back))
         }
 
-        /// The blend masks of the lanes of `kept` that moved back, and of those that moved on.
+        /// The blend masks of the lanes that moved back, and of those that moved on.
         #[inline(always)]
-        unsafe fn masks(self, kept: Bits) -> (V, V) {
-            (mask(self.back & kept), mask(self.on & kept))
+        unsafe fn masks(self) -> (V, V) {
+            (mask(self.back), mask(self.on))
         }
     }
 
@@ -895,8 +895,16 @@ mod avx {
         let t = mul_vec(inv_j, branch);
 
         // The lo end runs outward to lower indices, the hi end to higher ones.
+        // Each end's node and the node beyond it, picked at once so that its four nodes need
+        // not outlive the other end's (fewer registers spilled): by the end's own offsets,
+        // since a lane that leaves the path below may compute on with any values.
         let (raw_lo, nodes_lo, moved_lo) = end_moved(table, m, t, lo, -1);
+        let (lo_in, lo_out) = end_and_beyond(&nodes_lo, moved_lo.masks());
+        // The same nodes in i's reference coordinates.
+        let (vertex_lo, vertex_lo_out) = end_and_beyond(&raw_lo, moved_lo.masks());
         let (raw_hi, nodes_hi, moved_hi) = end_moved(table, m, t, hi, 1);
+        let (hi_in, hi_out) = end_and_beyond(&nodes_hi, moved_hi.masks());
+        let (vertex_hi, vertex_hi_out) = end_and_beyond(&raw_hi, moved_hi.masks());
         // The lanes whose ends both moved by at most a node, into a chain still short: they
         // take the new ends; the others keep theirs and leave the path.
         let (new_lo, new_hi) = (sub_i(lo, moved_lo.offsets()), add_i(hi, moved_hi.offsets()));
@@ -908,12 +916,6 @@ mod avx {
         lo = select_i(lo, new_lo, moved);
         hi = select_i(hi, new_hi, moved);
         on_path &= moved;
-        let (masks_lo, masks_hi) = (moved_lo.masks(moved), moved_hi.masks(moved));
-        let (lo_in, lo_out) = end_and_beyond(&nodes_lo, masks_lo);
-        let (hi_in, hi_out) = end_and_beyond(&nodes_hi, masks_hi);
-        // The same nodes in i's reference coordinates.
-        let (vertex_lo, vertex_lo_out) = end_and_beyond(&raw_lo, masks_lo);
-        let (vertex_hi, vertex_hi_out) = end_and_beyond(&raw_hi, masks_hi);
 
         let (t_lo, edge_lo, found_lo, ends_lo) = exit_near(table, lo_in, lo_out, guess_lo);
         let (t_hi, edge_hi, found_hi, ends_hi) = exit_near(table, hi_in, hi_out, guess_hi);
