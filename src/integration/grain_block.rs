@@ -251,8 +251,8 @@ mod avx {
     // The helpers run AVX instructions: every one is inlined into `advance_full_block`, which
     // is compiled for AVX and called only where the processor has it.
     use super::*;
-    use std::arch::x86_64::*;
     use crate::lanes::avx::transpose;
+    use std::arch::x86_64::*;
     use std::ops::{Add, Div, Mul, Neg, Sub};
 
     // The transposes read a grain as thirteen `f64`s, a stress record as seven words and a

@@ -669,8 +669,7 @@ impl<'a> PolygonsAhead<'a> {
             && self.pairs[0] == k
             && self.pairs[BLOCK - 1] == k + BLOCK - 1
             && self.results.all_on_path()
-            && (0..BLOCK)
-                .all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
+            && (0..BLOCK).all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
     }
 
     /// Writes the states, flags and records of the block's pairs, where
