@@ -510,32 +510,32 @@ fn run(cli: Cli) -> Result<()> {
                 Some(path) => format!("checkpoint: {}", path.display()),
                 None => format!("model: {:?}", model.level()),
             };
-            let result = pool
-                .install(|| {
-                    let mut world = match from_checkpoint {
-                        Some(world) => world,
-                        None => {
-                            let mut world = sdem::run::bench::dense_packing(grains, resolution);
-                            sdem::run::bench::with_model(&mut world, model.level());
-                            if friction > 0.0 {
-                                sdem::run::bench::with_friction(&mut world, friction);
-                            }
-                            world
+            let result = pool.install(|| {
+                let mut world = match from_checkpoint {
+                    Some(world) => world,
+                    None => {
+                        let mut world = sdem::run::bench::dense_packing(grains, resolution);
+                        sdem::run::bench::with_model(&mut world, model.level());
+                        if friction > 0.0 {
+                            sdem::run::bench::with_friction(&mut world, friction);
                         }
-                    };
-                    sdem::run::bench::run_bench(&mut world, warmup, steps)
-                })
-                .map_err(|e| match &from {
-                    // The usual cause on a compaction's checkpoint, and not one the step can name.
-                    Some(path) => anyhow!(
-                        "{e}\n  (sdem bench steps the world of {} with its walls at their \
-                     checkpointed velocities and without the loading's rate control: a box that \
-                     was closing keeps closing, and a jammed packing squeezed long enough fails; \
-                     time fewer steps)",
-                        path.display()
-                    ),
-                    None => anyhow::Error::new(e),
-                })?;
+                        world
+                    }
+                };
+                sdem::run::bench::run_bench(&mut world, warmup, steps)
+            });
+            // A compaction's checkpoint stepped long enough fails for a reason the step cannot
+            // name: say it.
+            let result = match (result, &from) {
+                (Err(e), Some(path)) => bail!(
+                    "{e}\n  (sdem bench steps the world of {} with its walls at their checkpointed \
+                     velocities and without the loading's rate control: a box that was closing \
+                     keeps closing, and a jammed packing squeezed long enough fails; time fewer \
+                     steps)",
+                    path.display()
+                ),
+                (result, _) => result?,
+            };
             println!(
                 "{}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  candidate pairs per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
                 scene,
