@@ -5,6 +5,7 @@
 //! [`World::frames_current`](super::World)).
 
 use super::grain_block::{BLOCK_GRAINS, BlockConstants, BlockLoads, advance_full_block};
+use super::sweep::SharedRows;
 use super::{
     BoxCarry, ChunkSums, FRAME_LANES, Frame, GRAIN_CHUNK, GrainStress, Instability, MAX_WALLS,
     PairContact, Parameters, StepTotals,
@@ -30,8 +31,8 @@ pub(super) struct GrainPass<'a> {
     pub contours: &'a Contours,
     pub neighbors: &'a NeighborList,
     /// The pair pass's flags and records.
-    pub pair_active: &'a [bool],
-    pub pair_contacts: &'a [PairContact],
+    pub pair_active: SharedRows<'a, bool>,
+    pub pair_contacts: SharedRows<'a, PairContact>,
     /// Whether pairs have friction (see [`PairContact::force_on_first_in`]).
     pub frictional_pairs: bool,
     /// The periodic cell, if any: a pair's second grain is met at an image.
@@ -558,8 +559,8 @@ impl GrainPass<'_> {
             }
         }
         // The first ends are a run of the list: one bounds check for the run.
-        let active = &self.pair_active[first_ends.clone()];
-        let contacts = &self.pair_contacts[first_ends];
+        let active = self.pair_active.rows(first_ends.clone());
+        let contacts = self.pair_contacts.rows(first_ends);
         for (&active, c) in active.iter().zip(contacts) {
             if !active {
                 continue;
@@ -597,8 +598,8 @@ impl GrainPass<'_> {
             // slices have one entry for each of the list's pairs (asserted above).
             let (active, c) = unsafe {
                 (
-                    *pair_active.get_unchecked(pair),
-                    pair_contacts.get_unchecked(pair),
+                    *pair_active.row_unchecked(pair),
+                    pair_contacts.row_unchecked(pair),
                 )
             };
             if !active {

@@ -27,6 +27,7 @@ mod grain_pass;
 pub mod instability;
 pub mod pairs;
 pub mod parameters;
+mod sweep;
 
 pub use instability::Instability;
 pub use parameters::Parameters;
@@ -43,7 +44,7 @@ use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::{Lanes, Real};
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
-use grain_pass::{CycleHalf, GrainChunk, GrainPass};
+use grain_pass::{CycleHalf, GrainPass};
 use parameters::MULTI_RATE_MIN_RIGID_SHARE;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -612,6 +613,9 @@ pub struct World {
     pair_contacts: Vec<PairContact>,
     /// Where the pair pass's chunks end (see [`pair_chunk_ends`]), recomputed with the list.
     pair_chunk_ends: Vec<usize>,
+    /// The least first grain of each grain chunk's pairs
+    /// ([`sweep::earliest_first_grains`]), recomputed with the list.
+    earliest_first_grains: Vec<u32>,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
     /// Each grain's model level (all at `params.level` unless the level is adaptive).
@@ -710,6 +714,7 @@ impl World {
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
             pair_chunk_ends: Vec::new(),
+            earliest_first_grains: Vec::new(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
             levels: vec![GrainLevel::new(start); n],
@@ -972,44 +977,131 @@ impl World {
             self.pair_contacts
                 .resize(pairs.len(), PairContact::default());
             self.pair_chunk_ends = pair_chunk_ends(pairs, n);
+            self.earliest_first_grains = sweep::earliest_first_grains(&self.neighbors, n);
         }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
     }
 
-    /// Contact geometry and forces of every candidate pair, and their sums.
-    /// `only_fast`: the second half of a multi-rate cycle, which computes only the pairs of two
-    /// fast grains.
-    fn compute_pair_contacts(&mut self, only_fast: bool) -> Result<PairSums, Instability> {
-        let pass = pairs::PairPass {
-            params: &self.params,
-            contours: &self.contours,
-            frames: &self.frames,
-            pairs: &self.neighbors.pairs,
-            images: &self.neighbors.images,
-            step: self.step,
-            periodic: self
-                .periodic
-                .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls))),
-            only_fast: only_fast.then_some(self.fast.as_slice()),
-            every_frame_a_circle: self.frames_all_circles(),
-            no_frame_a_circle: self.frames_no_circle(),
+    /// The step's pair pass and grain pass, in one sweep over the chunks ([`sweep`]): the
+    /// contact geometry and forces of every candidate pair (in the second half of a multi-rate
+    /// cycle, `cycle == Some(true)`, of the pairs of two fast grains only; the others keep the
+    /// first half's records), and each grain's update over `dt`. `pair_cell`: in a periodic
+    /// cell, the cell where the pairs meet and its velocity gradient; `cell_motion`: its
+    /// motion over the step, with which the grain pass carries and wraps the grains. Returns
+    /// the pairs' sums and each grain chunk's, in chunk order ([`World::add_grain_sums`]). A
+    /// failed pair leaves some grains updated and others not, each with its frame.
+    fn pair_and_grain_passes(
+        &mut self,
+        dt: f64,
+        cycle: Option<bool>,
+        pair_cell: Option<(PeriodicCell, DMat2)>,
+        carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>,
+        cell_motion: Option<CellMotion>,
+    ) -> Result<(PairSums, Vec<ChunkSums>), Instability> {
+        let start = Instant::now();
+        // The wraps are written by the pass in a periodic cell; elsewhere they are a scratch
+        // row the chunks carry unread.
+        self.wraps.resize(self.grains.len(), [0, 0]);
+        let every_frame_a_circle = self.frames_all_circles();
+        let no_frame_a_circle = self.frames_no_circle();
+        let step = self.step;
+        // Full-level grains are in a world at that level or with adaptive levels.
+        let blocks = self.grain_blocks
+            && cycle.is_none()
+            && (self.params.level == ModelLevel::Full || self.params.adaptive.is_some())
+            && grain_block::blocks_available();
+        let World {
+            params,
+            contours,
+            neighbors,
+            walls,
+            fast,
+            grains,
+            grain_stress,
+            levels,
+            wall_history,
+            frames,
+            centers,
+            reach,
+            wraps,
+            pair_state,
+            pair_active,
+            pair_contacts,
+            pair_chunk_ends,
+            earliest_first_grains,
+            ..
+        } = self;
+        let (params, contours, neighbors, fast) = (&*params, &*contours, &*neighbors, &*fast);
+        // The cell at the start of the step (where the pairs met), before `cell_motion`.
+        let cell = cell_motion.map(|motion| motion.before);
+        // A periodic cell's virtual walls meet no grain.
+        let walls: &[Wall] = if cell.is_some() { &[] } else { walls };
+        let wall_friction = params
+            .friction
+            .as_ref()
+            .map_or([0.0; MAX_WALLS], |f| f.walls);
+        let rows = sweep::SweepRows {
+            grains,
+            stresses: grain_stress,
+            levels,
+            wall_histories: wall_history,
+            frames,
+            centers,
+            reach,
+            wraps,
+            pair_states: pair_state,
+            pair_active,
+            pair_contacts,
+            pair_chunk_ends,
+            earliest_first_grains,
         };
-        let chunks = pair_chunks(
-            &self.pair_chunk_ends,
-            &mut self.pair_state,
-            &mut self.pair_active,
-            &mut self.pair_contacts,
-        );
-        let chunk_results: Vec<PairSums> = chunks
-            .into_par_iter()
-            .map(|(first_pair, states, actives, records)| {
-                pass.chunk(first_pair, states, actives, records)
-            })
-            .collect();
+        let swept = sweep::sweep(rows, |views| {
+            let pair_pass = pairs::PairPass {
+                params,
+                contours,
+                frames: views.frames,
+                pairs: &neighbors.pairs,
+                images: &neighbors.images,
+                step,
+                periodic: pair_cell,
+                only_fast: (cycle == Some(true)).then_some(fast.as_slice()),
+                every_frame_a_circle,
+                no_frame_a_circle,
+            };
+            let grain_pass = GrainPass {
+                params,
+                contours,
+                neighbors,
+                pair_active: views.pair_active,
+                pair_contacts: views.pair_contacts,
+                frictional_pairs: params.frictional_pairs(),
+                cell,
+                walls,
+                wall_friction,
+                // A frictional wall drops the springs of the grains it no longer touches.
+                wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
+                // The affine carry is applied to each grain right after its update, where the
+                // pass has the grain at hand (a pass of its own after the step cost some 4% of
+                // a 10⁵-grain run).
+                carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
+                cell_motion,
+                step,
+                dt,
+                cycle: cycle.map(|second| CycleHalf { fast, second }),
+                blocks,
+            };
+            (pair_pass, grain_pass)
+        });
+        let seconds = start.elapsed().as_secs_f64();
+        self.phase_times.pairs += swept.pair_share * seconds;
+        self.phase_times.grains += (1.0 - swept.pair_share) * seconds;
         let mut totals = PairSums::default();
-        for sums in chunk_results {
+        for sums in swept.pairs {
             if let Some(f) = sums.failure {
+                // Some chunks' grains were updated and given their frames, others not: the
+                // frames are written afresh from the grains before another step.
+                self.frames_current = false;
                 return Err(f);
             }
             totals.capped += sums.capped;
@@ -1019,7 +1111,7 @@ impl World {
             totals.dissipation += sums.dissipation;
             totals.sliding += sums.sliding;
         }
-        Ok(totals)
+        Ok((totals, swept.grains))
     }
 
     /// Advances the world by one time step: a plain step of `params.dt`, or a multi-rate cycle.
@@ -1047,33 +1139,32 @@ impl World {
 
     fn step_plain(&mut self) -> Result<(), Instability> {
         self.prepare(0.0)?;
-        let pairs_start = Instant::now();
-        let pair_sums = self.compute_pair_contacts(false)?;
-        let grains_start = Instant::now();
-        self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
-
         let dt = self.params.dt;
         let carried_box = self.carried_box(dt);
+        let pair_cell = self.pair_cell();
+        // A periodic cell moves first: the grain pass carries and wraps each grain with it.
+        // (Its motion depends only on the walls' velocities, which the loading set before the
+        // step; the pairs meet in the cell at the step's start. A step that fails leaves the
+        // cell moved.)
+        let cell_motion = self.periodic.as_mut().map(|periodic| {
+            let area_before = periodic.cell(&self.walls).area();
+            (periodic.advance(&mut self.walls, dt), area_before)
+        });
+        let (pair_sums, chunk_sums) = self.pair_and_grain_passes(
+            dt,
+            None,
+            pair_cell,
+            carried_box,
+            cell_motion.map(|(motion, _)| motion),
+        )?;
+        let grains_start = Instant::now();
         let mut totals = StepTotals {
             capped_contacts: pair_sums.capped,
             friction_dissipation: pair_sums.dissipation,
             sliding_contacts: pair_sums.sliding,
             ..Default::default()
         };
-        // A periodic cell moves first: the grain pass carries and wraps each grain with it.
-        // (Its motion depends only on the walls' velocities, which the loading set before the
-        // step. A step that fails leaves the cell moved with the grains updated.)
-        let cell_motion = self.periodic.as_mut().map(|periodic| {
-            let area_before = periodic.cell(&self.walls).area();
-            (periodic.advance(&mut self.walls, dt), area_before)
-        });
-        let ends = self.grain_pass(
-            dt,
-            None,
-            carried_box,
-            cell_motion.map(|(motion, _)| motion),
-            &mut totals,
-        )?;
+        let ends = self.add_grain_sums(&chunk_sums, &mut totals)?;
         totals.contacts = ends.contact_ends / 2;
         match cell_motion {
             Some((motion, area_before)) => {
@@ -1108,16 +1199,16 @@ impl World {
         let mut totals = StepTotals::default();
         let mut ends = PassEnds::default();
         for second in [false, true] {
-            let pairs_start = Instant::now();
-            let pair_sums = self.compute_pair_contacts(second)?;
+            let carried_box = self.carried_box(substep);
+            let pair_cell = self.pair_cell();
+            let (pair_sums, chunk_sums) =
+                self.pair_and_grain_passes(substep, Some(second), pair_cell, carried_box, None)?;
             let grains_start = Instant::now();
-            self.phase_times.pairs += (grains_start - pairs_start).as_secs_f64();
             if !second {
                 // The contacts capped at the cycle's start.
                 totals.capped_contacts = pair_sums.capped;
             }
-            let carried_box = self.carried_box(substep);
-            let half = self.grain_pass(substep, Some(second), carried_box, None, &mut totals)?;
+            let half = self.add_grain_sums(&chunk_sums, &mut totals)?;
             ends.contact_ends += half.contact_ends;
             self.move_walls(substep, carried_box);
             self.phase_times.grains += grains_start.elapsed().as_secs_f64();
@@ -1204,6 +1295,13 @@ impl World {
 
     /// The affine carry over `dt` in an affine phase (not in a periodic cell): from the box now
     /// to the box after the walls' move.
+    /// In a periodic cell, the cell where the pairs meet (at the start of the step, before it
+    /// moves) and its velocity gradient.
+    fn pair_cell(&self) -> Option<(PeriodicCell, DMat2)> {
+        self.periodic
+            .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)))
+    }
+
     fn carried_box(&self, dt: f64) -> Option<((DVec2, DVec2), (DVec2, DVec2))> {
         (self.affine_carry && self.periodic.is_none())
             .then(|| (box_corners(&self.walls), box_corners_after(&self.walls, dt)))
@@ -1219,100 +1317,20 @@ impl World {
         }
     }
 
-    /// The grain pass over every grain (see [`GrainPass`]): `cycle` is `None` for a plain step,
-    /// else whether it runs the cycle's second half. Its sums are added to `totals` in chunk
-    /// order.
-    fn grain_pass(
+    /// Adds the grain pass's chunk sums (in chunk order) to `totals`; returns its ends, or
+    /// the first chunk's failure.
+    fn add_grain_sums(
         &mut self,
-        dt: f64,
-        cycle: Option<bool>,
-        carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>,
-        cell_motion: Option<CellMotion>,
+        chunk_sums: &[ChunkSums],
         totals: &mut StepTotals,
     ) -> Result<PassEnds, Instability> {
-        // The wraps are written by the pass in a periodic cell; elsewhere they are a scratch
-        // row the chunks carry unread.
-        self.wraps.resize(self.grains.len(), [0, 0]);
-        let params = &self.params;
-        // The cell at the start of the step (where the pairs met), before `cell_motion`.
-        let cell = cell_motion.map(|motion| motion.before);
-        // A periodic cell's virtual walls meet no grain.
-        let walls: &[Wall] = if cell.is_some() { &[] } else { &self.walls };
-        let wall_friction = params
-            .friction
-            .as_ref()
-            .map_or([0.0; MAX_WALLS], |f| f.walls);
-        // The affine carry is applied to each grain right after its update, where the pass has
-        // the grain at hand (a pass of its own after the step cost some 4% of a 10⁵-grain run).
-        let pass = GrainPass {
-            params,
-            contours: &self.contours,
-            neighbors: &self.neighbors,
-            pair_active: &self.pair_active,
-            pair_contacts: &self.pair_contacts,
-            frictional_pairs: params.frictional_pairs(),
-            cell,
-            walls,
-            wall_friction,
-            // A frictional wall drops the springs of the grains it no longer touches.
-            wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
-            carry: carried_box.map(|(from, to)| BoxCarry::new(from, to)),
-            cell_motion,
-            step: self.step,
-            dt,
-            cycle: cycle.map(|second| CycleHalf {
-                fast: &self.fast,
-                second,
-            }),
-            // Full-level grains are in a world at that level or with adaptive levels.
-            blocks: self.grain_blocks
-                && cycle.is_none()
-                && (params.level == ModelLevel::Full || params.adaptive.is_some())
-                && grain_block::blocks_available(),
-        };
-        let chunk_sums: Vec<ChunkSums> = self
-            .grains
-            .par_chunks_mut(GRAIN_CHUNK)
-            .zip(self.grain_stress.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.levels.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.wall_history.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.frames.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.centers.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.reach.par_chunks_mut(GRAIN_CHUNK))
-            .zip(self.wraps.par_chunks_mut(GRAIN_CHUNK))
-            .enumerate()
-            .map(
-                |(
-                    chunk,
-                    (
-                        (
-                            (((((grains, stresses), levels), wall_histories), frames), centers),
-                            reach,
-                        ),
-                        wraps,
-                    ),
-                )| {
-                    let chunk_grains = GrainChunk {
-                        grains,
-                        stresses,
-                        levels,
-                        wall_histories,
-                        frames,
-                        centers,
-                        reach,
-                        wraps,
-                    };
-                    pass.chunk(chunk * GRAIN_CHUNK, chunk_grains)
-                },
-            )
-            .collect();
         // Every grain was updated and given its next frame, failed steps included (a grain's
         // failure is reported after the pass).
         self.frames_current = true;
         self.circle_frames = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
 
         let mut ends = PassEnds::default();
-        for sums in &chunk_sums {
+        for sums in chunk_sums {
             if let Some(f) = sums.failure {
                 return Err(f);
             }
@@ -1484,33 +1502,6 @@ fn pair_chunk_ends(pairs: &[[u32; 2]], grains: usize) -> Vec<usize> {
         "every pair's first grain is a grain"
     );
     ends
-}
-
-/// The pair pass's chunks: for each, the index of its first pair and its pairs' states, flags
-/// and records, cut at `ends` (increasing, the last one the number of pairs).
-#[allow(clippy::type_complexity)]
-fn pair_chunks<'a>(
-    ends: &[usize],
-    mut states: &'a mut [PairState],
-    mut actives: &'a mut [bool],
-    mut records: &'a mut [PairContact],
-) -> Vec<(
-    usize,
-    &'a mut [PairState],
-    &'a mut [bool],
-    &'a mut [PairContact],
-)> {
-    let mut chunks = Vec::with_capacity(ends.len());
-    let mut start = 0;
-    for &end in ends {
-        let (state, states_rest) = std::mem::take(&mut states).split_at_mut(end - start);
-        let (active, actives_rest) = std::mem::take(&mut actives).split_at_mut(end - start);
-        let (record, records_rest) = std::mem::take(&mut records).split_at_mut(end - start);
-        chunks.push((start, state, active, record));
-        (states, actives, records) = (states_rest, actives_rest, records_rest);
-        start = end;
-    }
-    chunks
 }
 
 /// Asks the processor to bring `value`'s first cache line in: a hint, no effect on results.
@@ -1764,7 +1755,7 @@ mod tests {
 
     /// The bits of what a frame holds for its grain: the first line, and the second where the
     /// grain is not a circle (a circle's second line is stale by design).
-    fn frame_bits(f: &Frame) -> Vec<u64> {
+    pub(super) fn frame_bits(f: &Frame) -> Vec<u64> {
         let mut v = vec![
             f.center.x.to_bits(),
             f.center.y.to_bits(),

@@ -19,6 +19,7 @@
 //! from its contact), so the blocks' make-up (which changes with the chunks, and so with the
 //! thread count) changes nothing.
 
+use super::sweep::SharedRows;
 use super::{
     Frame, Instability, PairContact, PairState, PairSums, Parameters, circle_velocity_at, prefetch,
 };
@@ -50,7 +51,7 @@ const PREFETCH_AHEAD: usize = 8;
 pub(super) struct PairPass<'a> {
     pub params: &'a Parameters,
     pub contours: &'a Contours,
-    pub frames: &'a [Frame],
+    pub frames: SharedRows<'a, Frame>,
     pub pairs: &'a [[u32; 2]],
     /// Periodic cell only: each pair's image vector.
     pub images: &'a [[i64; 2]],
@@ -234,7 +235,7 @@ impl<'a> PairPass<'a> {
             && hint.second.lo >= 0
             && (self.no_frame_a_circle || {
                 let [i, j] = self.pairs[p];
-                !self.frames[i as usize].circle && !self.frames[j as usize].circle
+                !self.frames.row(i as usize).circle && !self.frames.row(j as usize).circle
             })
     }
 
@@ -242,7 +243,7 @@ impl<'a> PairPass<'a> {
     #[inline(always)]
     fn frames_of(&self, p: usize) -> [&'a Frame; 2] {
         let frames = self.frames;
-        self.pairs[p].map(|g| &frames[g as usize])
+        self.pairs[p].map(|g| frames.row(g as usize))
     }
 
     /// Pair `p`'s two shapes (of its frames `ends`), read in place, the shift to the image of
@@ -263,7 +264,7 @@ impl<'a> PairPass<'a> {
     #[inline(always)]
     fn prefetch_ahead(&self, p: usize) {
         if let Some(&[_, ahead]) = self.pairs.get(p + PREFETCH_AHEAD) {
-            prefetch(&self.frames[ahead as usize]);
+            prefetch(self.frames.row(ahead as usize));
         }
     }
 
@@ -273,7 +274,7 @@ impl<'a> PairPass<'a> {
         !self.no_frame_a_circle
             && (self.every_frame_a_circle
                 || self.pairs[p..p + LANES].iter().all(|&[i, j]| {
-                    self.frames[i as usize].circle && self.frames[j as usize].circle
+                    self.frames.row(i as usize).circle && self.frames.row(j as usize).circle
                 }))
     }
 
@@ -305,7 +306,7 @@ impl<'a> PairPass<'a> {
         sums: &mut PairSums,
     ) {
         let [i, j] = self.pairs[p];
-        let (fi, fj) = (&self.frames[i as usize], &self.frames[j as usize]);
+        let (fi, fj) = (self.frames.row(i as usize), self.frames.row(j as usize));
         let end = self.second_end(p, fi, fj);
         let mut hint = state.hint;
         let overlap = if let Some((contact, next_hint)) = computed {
@@ -511,9 +512,9 @@ impl<'a> PairPass<'a> {
         // A plain loop: `array::from_fn` built such arrays aside and copied them (a `memcpy` a
         // block).
         let frames = self.frames;
-        let mut ends = [(&frames[0], &frames[0]); LANES];
+        let mut ends = [(frames.row(0), frames.row(0)); LANES];
         for (end, &[i, j]) in ends.iter_mut().zip(&self.pairs[first..first + LANES]) {
-            *end = (&frames[i as usize], &frames[j as usize]);
+            *end = (frames.row(i as usize), frames.row(j as usize));
         }
         input.set_circles(&ends);
         // Only the branch vectors outlive the lanes' setting (zero outside a periodic cell).
@@ -1609,7 +1610,7 @@ mod tests {
             let pass = PairPass {
                 params: &params,
                 contours: &contours,
-                frames: &frames,
+                frames: SharedRows::new(&frames),
                 pairs: &pairs,
                 images: &images,
                 step: 7,
@@ -1727,7 +1728,7 @@ mod tests {
             let pass = |frames| PairPass {
                 params: &params,
                 contours: &contours,
-                frames,
+                frames: SharedRows::new(frames),
                 pairs: &pairs,
                 images: &images,
                 step: 3,

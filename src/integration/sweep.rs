@@ -1,0 +1,550 @@
+//! The pair pass and the grain pass of a step in one sweep over the grain chunks: a chunk's
+//! pairs (those whose first grain is one of its grains), then at once its grains, while the
+//! pairs' records and the grains' frames are still in cache (issue #16: at 10⁵ grains the two
+//! passes one after the other read every record back from memory; the sweep was 1.06 times as
+//! fast on the dense bench's full level, on one thread).
+//!
+//! A grain chunk needs the records of its grains' pairs: its own chunk's (the pairs `[g, j]`)
+//! and those of the pairs `[i, g]`, whose first grain i comes before g (the list holds
+//! `i < j`), in the same chunk or an earlier one. One task sweeps a run of consecutive chunks
+//! in order, so that the chunk's own pairs and those of the task's earlier chunks are done
+//! when its grains are; a chunk with a pair `[i, g]` whose first grain lies before the task's
+//! run waits for a second, parallel round ([`earliest_first_grains`] says which). The same
+//! chunks wait for the frames, too: the pair pass of an earlier run reads the frames of its
+//! pairs' second grains, which the grain pass replaces by the next step's, and those grains
+//! are exactly the grains of the chunks that wait.
+//!
+//! Each chunk's results are the same whatever task computes it, and its sums go to its own
+//! slot, added in chunk order after the sweep: the step's bits do not depend on the number of
+//! tasks or threads.
+
+use super::grain_pass::{GrainChunk, GrainPass};
+use super::pairs::PairPass;
+use super::{
+    ChunkSums, Frame, GRAIN_CHUNK, GrainStress, MAX_WALLS, PairContact, PairState, PairSums,
+};
+use crate::geometry::broadphase::NeighborList;
+use crate::grain::{Grain, GrainLevel};
+use glam::DVec2;
+use rayon::prelude::*;
+use std::marker::PhantomData;
+use std::ops::Range;
+use std::time::Instant;
+
+/// Rows of a table that the tasks of a sweep read while other tasks write other rows of it
+/// (the frames, the pairs' flags and records): a slice's reference would claim the whole
+/// table for as long as it lives. Built from a slice, it is one; built from a raw pointer
+/// ([`SharedRows::from_raw`]), its maker answers for each row's reads and writes being
+/// ordered.
+pub(super) struct SharedRows<'a, T> {
+    start: *const T,
+    len: usize,
+    rows: PhantomData<&'a [T]>,
+}
+
+impl<T> Clone for SharedRows<'_, T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for SharedRows<'_, T> {}
+
+// SAFETY: the view hands out shared references to its rows only, as `&[T]` does.
+unsafe impl<T: Sync> Send for SharedRows<'_, T> {}
+// SAFETY: as above.
+unsafe impl<T: Sync> Sync for SharedRows<'_, T> {}
+
+impl<'a, T> SharedRows<'a, T> {
+    #[cfg(test)]
+    pub fn new(rows: &'a [T]) -> Self {
+        Self {
+            start: rows.as_ptr(),
+            len: rows.len(),
+            rows: PhantomData,
+        }
+    }
+
+    /// # Safety
+    /// `start` points to `len` initialised rows that stay allocated for `'a`, and no row is
+    /// written while a reference this view gave to it is alive, nor read through the view
+    /// while something else writes it.
+    pub unsafe fn from_raw(start: *const T, len: usize) -> Self {
+        Self {
+            start,
+            len,
+            rows: PhantomData,
+        }
+    }
+
+    #[inline(always)]
+    pub fn len(self) -> usize {
+        self.len
+    }
+
+    /// Row `k`; panics past the end, as a slice's index does.
+    #[inline(always)]
+    pub fn row(self, k: usize) -> &'a T {
+        assert!(k < self.len);
+        // SAFETY: k is a row of the view (checked above).
+        unsafe { &*self.start.add(k) }
+    }
+
+    /// # Safety
+    /// `k` is below [`len`](Self::len).
+    #[inline(always)]
+    pub unsafe fn row_unchecked(self, k: usize) -> &'a T {
+        debug_assert!(k < self.len);
+        // SAFETY: the caller's.
+        unsafe { &*self.start.add(k) }
+    }
+
+    /// The rows `range`; panics unless they are rows of the view.
+    #[inline(always)]
+    pub fn rows(self, range: Range<usize>) -> &'a [T] {
+        assert!(range.start <= range.end && range.end <= self.len);
+        // SAFETY: the range lies within the view (checked above).
+        unsafe { std::slice::from_raw_parts(self.start.add(range.start), range.len()) }
+    }
+}
+
+/// A table whose disjoint runs of rows the sweep's tasks write, one task a run at a time
+/// ([`RowRuns::run`]).
+struct RowRuns<'a, T> {
+    start: *mut T,
+    len: usize,
+    rows: PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: the runs it hands out are `&mut [T]`, which may be sent to another thread when T is
+// `Send`; that they are disjoint is the caller's to keep (`RowRuns::run`).
+unsafe impl<T: Send> Send for RowRuns<'_, T> {}
+// SAFETY: as above.
+unsafe impl<T: Send> Sync for RowRuns<'_, T> {}
+
+impl<'a, T> RowRuns<'a, T> {
+    fn new(rows: &'a mut [T]) -> Self {
+        Self {
+            start: rows.as_mut_ptr(),
+            len: rows.len(),
+            rows: PhantomData,
+        }
+    }
+
+    /// The rows `range` (clipped to the table), to write.
+    ///
+    /// # Safety
+    /// No other reference to these rows is alive while the run is, nor made until it ends.
+    #[inline(always)]
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn run(&self, range: Range<usize>) -> &'a mut [T] {
+        let end = range.end.min(self.len);
+        let start = range.start.min(end);
+        // SAFETY: the rows lie within the table (clipped above); the caller's for the rest.
+        unsafe { std::slice::from_raw_parts_mut(self.start.add(start), end - start) }
+    }
+}
+
+/// The rows of a world that the sweep writes: each grain chunk's rows and each chunk's pairs.
+pub(super) struct SweepRows<'a> {
+    pub grains: &'a mut [Grain],
+    pub stresses: &'a mut [GrainStress],
+    pub levels: &'a mut [GrainLevel],
+    pub wall_histories: &'a mut [[f64; MAX_WALLS]],
+    pub frames: &'a mut [Frame],
+    pub centers: &'a mut [DVec2],
+    pub reach: &'a mut [f64],
+    pub wraps: &'a mut [[i64; 2]],
+    pub pair_states: &'a mut [PairState],
+    pub pair_active: &'a mut [bool],
+    pub pair_contacts: &'a mut [super::PairContact],
+    /// Where each grain chunk's pairs end (see [`super::pair_chunk_ends`]).
+    pub pair_chunk_ends: &'a [usize],
+    /// The least first grain of each grain chunk's pairs ([`earliest_first_grains`]).
+    pub earliest_first_grains: &'a [u32],
+}
+
+/// What the sweep reads while it writes the rows (built from their views: the frames for the
+/// pair pass, the pairs' flags and records for the grain pass).
+pub(super) struct SweepViews<'a> {
+    pub frames: SharedRows<'a, Frame>,
+    pub pair_active: SharedRows<'a, bool>,
+    pub pair_contacts: SharedRows<'a, PairContact>,
+}
+
+/// One grain chunk's results: its pairs' sums, its grains' (`None` until its grains are
+/// done), and the seconds each pass took on it.
+#[derive(Default)]
+struct ChunkResults {
+    pairs: PairSums,
+    grains: Option<ChunkSums>,
+    pair_seconds: f64,
+    grain_seconds: f64,
+}
+
+/// What a sweep leaves: each chunk's pair sums and grain sums, in chunk order, and the share
+/// of its time the pair pass took.
+pub(super) struct SweepResults {
+    pub pairs: Vec<PairSums>,
+    pub grains: Vec<ChunkSums>,
+    pub pair_share: f64,
+}
+
+/// The pair pass and the grain pass over every chunk (see the module's docs): `passes` makes
+/// the two passes from the views of the rows being written. The sweep stops short of a
+/// chunk's grains (and of those of the later chunks of its run) when a pair of its run
+/// failed: its results then hold the failure, and some grains are updated, others not.
+pub(super) fn sweep<'a>(
+    rows: SweepRows<'a>,
+    passes: impl FnOnce(SweepViews<'a>) -> (PairPass<'a>, GrainPass<'a>),
+) -> SweepResults {
+    let chunks = rows.pair_chunk_ends.len();
+    let grains = rows.grains.len();
+    assert!(
+        chunks == grains.div_ceil(GRAIN_CHUNK)
+            && rows.earliest_first_grains.len() == chunks
+            && [
+                rows.stresses.len(),
+                rows.levels.len(),
+                rows.wall_histories.len(),
+                rows.frames.len(),
+                rows.centers.len(),
+                rows.reach.len(),
+                rows.wraps.len()
+            ]
+            .iter()
+            .all(|&len| len == grains)
+            && rows.pair_states.len() == rows.pair_active.len()
+            && rows.pair_active.len() == rows.pair_contacts.len()
+            && rows
+                .pair_chunk_ends
+                .last()
+                .is_none_or(|&end| end == rows.pair_contacts.len())
+            && rows.pair_chunk_ends.is_sorted(),
+        "the sweep's rows disagree with the chunks of the list"
+    );
+    let frames = RowRuns::new(rows.frames);
+    let pair_active = RowRuns::new(rows.pair_active);
+    let pair_contacts = RowRuns::new(rows.pair_contacts);
+    // SAFETY: the views and the runs cover the same rows; the order of the sweep (the module's
+    // docs) writes a row only where no view reads it: a chunk's frames after every pair that
+    // reads them, a pair's flag and record before any grain that reads them.
+    let views = unsafe {
+        SweepViews {
+            frames: SharedRows::from_raw(frames.start, frames.len),
+            pair_active: SharedRows::from_raw(pair_active.start, pair_active.len),
+            pair_contacts: SharedRows::from_raw(pair_contacts.start, pair_contacts.len),
+        }
+    };
+    let (pair_pass, grain_pass) = passes(views);
+    let writes = Writes {
+        grains: RowRuns::new(rows.grains),
+        stresses: RowRuns::new(rows.stresses),
+        levels: RowRuns::new(rows.levels),
+        wall_histories: RowRuns::new(rows.wall_histories),
+        frames,
+        centers: RowRuns::new(rows.centers),
+        reach: RowRuns::new(rows.reach),
+        wraps: RowRuns::new(rows.wraps),
+        pair_states: RowRuns::new(rows.pair_states),
+        pair_active,
+        pair_contacts,
+        pair_chunk_ends: rows.pair_chunk_ends,
+    };
+    let mut results: Vec<ChunkResults> = (0..chunks).map(|_| ChunkResults::default()).collect();
+    let plan = Plan::new(rows.earliest_first_grains, rayon::current_num_threads());
+    let run = plan.run;
+    results
+        .par_chunks_mut(run)
+        .enumerate()
+        .for_each(|(r, results)| {
+            let first_chunk = r * run;
+            let mut failed = false;
+            for (k, result) in results.iter_mut().enumerate() {
+                let chunk = first_chunk + k;
+                let start = Instant::now();
+                // SAFETY: each chunk's pairs are swept once, by its run's task.
+                result.pairs = unsafe { writes.pair_chunk(&pair_pass, chunk) };
+                let pairs_done = Instant::now();
+                result.pair_seconds = (pairs_done - start).as_secs_f64();
+                failed |= result.pairs.failure.is_some();
+                if plan.fused && !failed && !waits(rows.earliest_first_grains, chunk, run) {
+                    // SAFETY: the chunk's pairs and those of its run's earlier chunks are
+                    // done, and no pair of it meets a grain before the run: the records it
+                    // reads are written, and the pair passes still to come read none of its
+                    // frames.
+                    result.grains = Some(unsafe { writes.grain_chunk(&grain_pass, chunk) });
+                    result.grain_seconds = pairs_done.elapsed().as_secs_f64();
+                }
+            }
+        });
+    let failed = results.iter().any(|result| result.pairs.failure.is_some());
+    if !failed {
+        // The chunks that waited: every pair is done, and no pair pass reads a frame any more.
+        results
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(_, result)| result.grains.is_none())
+            .for_each(|(chunk, result)| {
+                let start = Instant::now();
+                // SAFETY: each waiting chunk is swept once, after every pair.
+                result.grains = Some(unsafe { writes.grain_chunk(&grain_pass, chunk) });
+                result.grain_seconds = start.elapsed().as_secs_f64();
+            });
+    }
+    let (pair_seconds, grain_seconds) = results.iter().fold((0.0, 0.0), |(p, g), result| {
+        (p + result.pair_seconds, g + result.grain_seconds)
+    });
+    let mut swept = SweepResults {
+        pairs: Vec::with_capacity(chunks),
+        grains: Vec::with_capacity(chunks),
+        pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
+    };
+    for result in results {
+        swept.pairs.push(result.pairs);
+        swept.grains.extend(result.grains);
+    }
+    swept
+}
+
+/// How the sweep's tasks share the chunks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Plan {
+    /// Chunks a task sweeps: one run a thread, so that one thread sweeps every chunk at once.
+    run: usize,
+    /// Whether a run's grains follow its pairs (but those of the chunks that wait); else every
+    /// grain waits for the second round, and the sweep is the pair pass and then the grain
+    /// pass.
+    fused: bool,
+}
+
+impl Plan {
+    fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
+        let chunks = earliest_first_grains.len();
+        let run = chunks.div_ceil(threads.max(1)).max(1);
+        let waiting = (0..chunks)
+            .filter(|&c| waits(earliest_first_grains, c, run))
+            .count();
+        // The chunks that wait are the later runs' own: while their grains wait, the first
+        // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
+        // numbered by its two processes' halves, half the chunks waited and two threads
+        // stepped 0.86 times as fast as with the two passes).
+        Self {
+            run,
+            fused: waiting * MOST_WAITING <= chunks,
+        }
+    }
+}
+
+/// The sweep takes the two passes one after the other where more than one chunk in
+/// `MOST_WAITING` would wait.
+const MOST_WAITING: usize = 8;
+
+/// Whether the grains of chunk `chunk` wait for the sweep's second round when tasks sweep runs
+/// of `run` chunks: whether one of its pairs has its first grain before the chunk's run.
+fn waits(earliest_first_grains: &[u32], chunk: usize, run: usize) -> bool {
+    (earliest_first_grains[chunk] as usize) < chunk / run * run * GRAIN_CHUNK
+}
+
+/// The rows the sweep writes, as runs.
+struct Writes<'a> {
+    grains: RowRuns<'a, Grain>,
+    stresses: RowRuns<'a, GrainStress>,
+    levels: RowRuns<'a, GrainLevel>,
+    wall_histories: RowRuns<'a, [f64; MAX_WALLS]>,
+    frames: RowRuns<'a, Frame>,
+    centers: RowRuns<'a, DVec2>,
+    reach: RowRuns<'a, f64>,
+    wraps: RowRuns<'a, [i64; 2]>,
+    pair_states: RowRuns<'a, PairState>,
+    pair_active: RowRuns<'a, bool>,
+    pair_contacts: RowRuns<'a, PairContact>,
+    pair_chunk_ends: &'a [usize],
+}
+
+impl Writes<'_> {
+    /// # Safety
+    /// Called once a sweep for each chunk, before any grain reads the chunk's pairs.
+    unsafe fn pair_chunk(&self, pass: &PairPass<'_>, chunk: usize) -> PairSums {
+        let start = if chunk == 0 {
+            0
+        } else {
+            self.pair_chunk_ends[chunk - 1]
+        };
+        let pairs = start..self.pair_chunk_ends[chunk];
+        // SAFETY: the caller's: these runs of the pair rows are this chunk's alone.
+        unsafe {
+            pass.chunk(
+                start,
+                self.pair_states.run(pairs.clone()),
+                self.pair_active.run(pairs.clone()),
+                self.pair_contacts.run(pairs),
+            )
+        }
+    }
+
+    /// # Safety
+    /// Called once a sweep for each chunk, after every pair that reads its frames and every
+    /// pair its grains read.
+    unsafe fn grain_chunk(&self, pass: &GrainPass<'_>, chunk: usize) -> ChunkSums {
+        let grains = chunk * GRAIN_CHUNK..(chunk + 1) * GRAIN_CHUNK;
+        // SAFETY: the caller's: these runs of the grain rows are this chunk's alone.
+        let rows = unsafe {
+            GrainChunk {
+                grains: self.grains.run(grains.clone()),
+                stresses: self.stresses.run(grains.clone()),
+                levels: self.levels.run(grains.clone()),
+                wall_histories: self.wall_histories.run(grains.clone()),
+                frames: self.frames.run(grains.clone()),
+                centers: self.centers.run(grains.clone()),
+                reach: self.reach.run(grains.clone()),
+                wraps: self.wraps.run(grains.clone()),
+            }
+        };
+        pass.chunk(grains.start, rows)
+    }
+}
+
+/// For each grain chunk, the least first grain of the pairs its grains are the second grain
+/// of (the chunk's first grain where it has none): the sweep computes a chunk's grains in the
+/// task that swept its pairs only when this grain is in the task's run.
+pub(super) fn earliest_first_grains(neighbors: &NeighborList, grains: usize) -> Vec<u32> {
+    (0..grains.div_ceil(GRAIN_CHUNK))
+        .into_par_iter()
+        .map(|chunk| {
+            let members = chunk * GRAIN_CHUNK..grains.min((chunk + 1) * GRAIN_CHUNK);
+            // A grain's second ends are in increasing pair order, and the list in increasing
+            // first grain: its first second end has the least first grain.
+            members
+                .clone()
+                .filter_map(|g| neighbors.second_ends_of(g).first())
+                .map(|&p| neighbors.pairs[p as usize][0])
+                .min()
+                .unwrap_or(members.start as u32)
+                .min(members.start as u32)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::boundary::periodic::PeriodicBoundary;
+    use crate::grain::ModelLevel;
+    use crate::integration::World;
+    use crate::run::bench::{dense_packing, with_model};
+
+    fn in_pool<T: Send>(threads: usize, work: impl FnOnce() -> T + Send) -> T {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(work)
+    }
+
+    /// A dense packing of about 2,600 grains (eleven chunks) at `level`, in its box or in a
+    /// periodic cell of the box's size, the box squeezed.
+    fn packing(level: ModelLevel, periodic: bool) -> World {
+        let mut world = dense_packing(2600, 1.0);
+        with_model(&mut world, level);
+        if periodic {
+            world = world.with_periodic(PeriodicBoundary::default());
+        }
+        let (w, h) = crate::boundary::walls::box_size(&world.walls);
+        world.walls[crate::boundary::walls::RIGHT].velocity.x = -2e-3 * w;
+        world.walls[crate::boundary::walls::TOP].velocity.y = -1e-3 * h;
+        world
+    }
+
+    #[test]
+    fn each_chunks_earliest_first_grain_is_the_least_first_grain_of_its_pairs() {
+        // Expectation: the least i over the list's pairs [i, j] with j in the chunk (the
+        // chunk's first grain where there is none), found by a scan of every pair.
+        let mut world = packing(ModelLevel::Full, false);
+        world.step().unwrap();
+        let n = world.grains.len();
+        let mut expected: Vec<u32> = (0..n.div_ceil(GRAIN_CHUNK))
+            .map(|c| (c * GRAIN_CHUNK) as u32)
+            .collect();
+        for &[i, j] in &world.neighbors.pairs {
+            let chunk = &mut expected[j as usize / GRAIN_CHUNK];
+            *chunk = (*chunk).min(i);
+        }
+        assert_eq!(world.earliest_first_grains, expected);
+        assert_eq!(earliest_first_grains(&world.neighbors, n), expected);
+        // The lattice's rows are longer than a chunk's first grains reach back: some chunk has
+        // pairs with the chunk before it.
+        assert!(
+            expected
+                .iter()
+                .enumerate()
+                .any(|(c, &first)| (first as usize) < c * GRAIN_CHUNK)
+        );
+    }
+
+    #[test]
+    fn the_sweep_gives_the_same_bits_on_any_number_of_threads() {
+        // Expectation: a chunk's pairs and grains are the same operations whichever task
+        // sweeps them, and whether its grains are computed at once or wait for the second
+        // round, or every chunk waits (the two passes one after the other); the sums are added
+        // in chunk order. So one thread (every chunk at once) and two, three or eight (runs
+        // whose first chunks wait, or the two passes) give the same grains, frames,
+        // contacts and totals, bit for bit: in a box and in a periodic cell, at the full level
+        // and for rigid discs.
+        let (mut fused_with_waiting, mut two_passes) = (false, false);
+        for (level, periodic) in [
+            (ModelLevel::Full, false),
+            (ModelLevel::Full, true),
+            (ModelLevel::Rigid, false),
+            (ModelLevel::Rigid, true),
+        ] {
+            let stepped = |threads: usize| {
+                in_pool(threads, || {
+                    let mut world = packing(level, periodic);
+                    for _ in 0..40 {
+                        world.step().unwrap();
+                    }
+                    let plan = Plan::new(&world.earliest_first_grains, threads);
+                    let waiting = (0..world.earliest_first_grains.len())
+                        .filter(|&c| {
+                            !plan.fused || waits(&world.earliest_first_grains, c, plan.run)
+                        })
+                        .count();
+                    let contacts: Vec<String> = world
+                        .contacts()
+                        .map(|(pair, c, _)| format!("{pair:?} {c:?}"))
+                        .collect();
+                    let frames: Vec<Vec<u64>> = world
+                        .frames
+                        .iter()
+                        .map(super::super::tests::frame_bits)
+                        .collect();
+                    (
+                        format!("{:?}", world.grains),
+                        frames,
+                        contacts,
+                        format!("{:?}", world.totals),
+                        waiting,
+                        plan.fused,
+                    )
+                })
+            };
+            let one = stepped(1);
+            assert_eq!(one.4, 0, "one thread sweeps every chunk at once");
+            assert!(one.2.len() > 5000, "{} contacts", one.2.len());
+            for threads in [2, 3, 8] {
+                let many = stepped(threads);
+                let at = format!("{level:?}, periodic {periodic}, {threads} threads");
+                assert!(many.4 > 0, "{at}: no chunk waited");
+                fused_with_waiting |= many.5;
+                two_passes |= !many.5;
+                assert!(one.0 == many.0, "{at}: grains differ");
+                assert!(one.1 == many.1, "{at}: frames differ");
+                assert!(one.2 == many.2, "{at}: contacts differ");
+                assert_eq!(one.3, many.3, "{at}: totals differ");
+            }
+        }
+        // Both ways of sweeping were taken.
+        assert!(fused_with_waiting && two_passes);
+    }
+}
