@@ -8,7 +8,7 @@ use super::grain_block::{BLOCK_GRAINS, BlockConstants, BlockLoads, advance_full_
 use super::sweep::SharedRows;
 use super::{
     BoxCarry, ChunkSums, FRAME_LANES, Frame, GRAIN_CHUNK, GrainStress, Instability, MAX_WALLS,
-    PairContact, Parameters, StepTotals,
+    PairContact, Parameters, StepTotals, prefetch_address,
 };
 use crate::boundary::periodic::{CellMotion, PeriodicCell};
 use crate::boundary::walls::Wall;
@@ -165,6 +165,7 @@ impl GrainPass<'_> {
                 &mut sums,
             )
         } else {
+            let grains_at = chunk.grains.as_ptr();
             for (k, ((((grain, stress), level), wall_history), frame)) in chunk
                 .grains
                 .iter_mut()
@@ -174,6 +175,7 @@ impl GrainPass<'_> {
                 .zip(chunk.frames.iter())
                 .enumerate()
             {
+                prefetch_grain(grains_at, k + GRAIN_PREFETCH_AHEAD);
                 self.one_grain(
                     first + k,
                     grain,
@@ -804,6 +806,20 @@ fn principal_directions_of_block(
     for (l, direction) in directions.iter_mut().enumerate() {
         direction.write(DVec2::new(cos.0[l], sin.0[l]));
     }
+}
+
+/// How many grains ahead the pass one grain at a time asks for a grain's state (issue #16: at
+/// 10⁵ rigid discs, where a grain's turn is some 30 ns, 8 ahead stepped 1.07 times as fast as
+/// leaving it to the processor's own prefetching).
+const GRAIN_PREFETCH_AHEAD: usize = 8;
+
+/// Asks for the two cache lines from grain `k` of the grains at `grains` (a [`Grain`] is 104
+/// bytes; wherever `k` lies: a prefetch changes nothing but the caches).
+#[inline(always)]
+fn prefetch_grain(grains: *const Grain, k: usize) {
+    let grain = grains.wrapping_add(k).cast::<u8>();
+    prefetch_address(grain);
+    prefetch_address(grain.wrapping_add(64));
 }
 
 /// The sums a grain needs from its contacts.

@@ -1507,14 +1507,21 @@ fn pair_chunk_ends(pairs: &[[u32; 2]], grains: usize) -> Vec<usize> {
 /// Asks the processor to bring `value`'s first cache line in: a hint, no effect on results.
 #[inline(always)]
 fn prefetch<T>(value: &T) {
+    prefetch_address((value as *const T).cast());
+}
+
+/// Asks the processor to bring the cache line of `address` in: a hint, whatever the address
+/// (a prefetch neither faults nor changes anything but the caches).
+#[inline(always)]
+fn prefetch_address(address: *const u8) {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch has no architectural effect; the pointer comes from a reference.
+    // SAFETY: a prefetch has no architectural effect, at any address.
     unsafe {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        _mm_prefetch::<_MM_HINT_T0>(value as *const T as *const i8);
+        _mm_prefetch::<_MM_HINT_T0>(address.cast());
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = value;
+    let _ = address;
 }
 
 #[cfg(test)]
