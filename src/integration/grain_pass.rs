@@ -770,10 +770,18 @@ fn principal_directions_in_lanes(
         blocks.remainder(),
         grains.len() / DIRECTION_LANES * DIRECTION_LANES,
     );
-    for ((grains, levels), directions) in blocks
+    let grains_at = grains.as_ptr();
+    for (b, ((grains, levels), directions)) in blocks
         .zip(levels.chunks_exact(DIRECTION_LANES))
         .zip(directions.chunks_exact_mut(DIRECTION_LANES))
+        .enumerate()
     {
+        let ahead = grains_at
+            .wrapping_add(DIRECTION_LANES * b + DIRECTIONS_PREFETCH_AHEAD)
+            .cast::<u8>();
+        for line in 0..(DIRECTION_LANES * size_of::<Grain>()).div_ceil(64) {
+            prefetch_address(ahead.wrapping_add(64 * line));
+        }
         principal_directions_of_block(grains, levels, directions);
     }
     principal_directions_of_block(
@@ -784,6 +792,10 @@ fn principal_directions_in_lanes(
 }
 
 const DIRECTION_LANES: usize = 4;
+
+/// How many grains ahead the principal directions ask for a grain's state, the pass's first
+/// read of it.
+const DIRECTIONS_PREFETCH_AHEAD: usize = 16;
 
 /// [`principal_directions`] of up to [`DIRECTION_LANES`] grains.
 #[inline(always)]

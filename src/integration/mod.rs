@@ -1504,12 +1504,6 @@ fn pair_chunk_ends(pairs: &[[u32; 2]], grains: usize) -> Vec<usize> {
     ends
 }
 
-/// Asks the processor to bring `value`'s first cache line in: a hint, no effect on results.
-#[inline(always)]
-fn prefetch<T>(value: &T) {
-    prefetch_address((value as *const T).cast());
-}
-
 /// Asks the processor to bring the cache line of `address` in: a hint, whatever the address
 /// (a prefetch neither faults nor changes anything but the caches).
 #[inline(always)]
