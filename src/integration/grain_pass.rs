@@ -166,6 +166,7 @@ impl GrainPass<'_> {
             )
         } else {
             let grains_at = chunk.grains.as_ptr();
+            let stresses_at = chunk.stresses.as_ptr();
             for (k, ((((grain, stress), level), wall_history), frame)) in chunk
                 .grains
                 .iter_mut()
@@ -175,7 +176,9 @@ impl GrainPass<'_> {
                 .zip(chunk.frames.iter())
                 .enumerate()
             {
+                // The state of the grain 8 ahead, and the stress record it will write.
                 prefetch_grain(grains_at, k + GRAIN_PREFETCH_AHEAD);
+                prefetch_address(stresses_at.wrapping_add(k + GRAIN_PREFETCH_AHEAD).cast());
                 self.one_grain(
                     first + k,
                     grain,

@@ -187,6 +187,20 @@ impl<'a> PairPass<'a> {
                 for lane in 0..LANES {
                     self.prefetch_ahead::<1>(p + lane, CIRCLE_PREFETCH_AHEAD);
                 }
+                // The list's line (eight pairs) of a block further on, and the records the
+                // block 32 pairs on will write (issue #16: with the grain pass's stress
+                // records, 1.028 times as fast at 10⁵ rigid discs on one thread, 1.010 on
+                // LAMMPS's packing).
+                prefetch_address(
+                    self.pairs
+                        .as_ptr()
+                        .wrapping_add(p + 3 * CIRCLE_PREFETCH_AHEAD)
+                        .cast(),
+                );
+                let records_ahead = records.as_ptr().wrapping_add(k + CIRCLE_PREFETCH_AHEAD);
+                for lane in 0..LANES {
+                    prefetch_address(records_ahead.wrapping_add(lane).cast());
+                }
                 let block = k..k + LANES;
                 let (input, out) = lanes.get_or_insert_with(Default::default);
                 self.circle_block::<FRICTIONAL>(
