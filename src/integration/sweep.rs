@@ -327,8 +327,8 @@ impl Plan {
             .count();
         // The chunks that wait are the later runs' own: while their grains wait, the first
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
-        // numbered by its two processes' halves, half the chunks waited and two threads
-        // stepped 0.86 times as fast as with the two passes).
+        // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
+        // 0.86 times as fast as with the two passes).
         Self {
             run,
             fused: waiting * MOST_WAITING <= chunks,
