@@ -44,7 +44,7 @@ use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::{Lanes, Real};
 use crate::output::measures::coordination_without_rattlers;
 use glam::{DMat2, DVec2};
-use grain_pass::{CycleHalf, GrainPass};
+use grain_pass::{CycleHalf, GrainChunk, GrainPass};
 use parameters::MULTI_RATE_MIN_RIGID_SHARE;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -1042,14 +1042,16 @@ impl World {
             .as_ref()
             .map_or([0.0; MAX_WALLS], |f| f.walls);
         let rows = sweep::SweepRows {
-            grains,
-            stresses: grain_stress,
-            levels,
-            wall_histories: wall_history,
-            frames,
-            centers,
-            reach,
-            wraps,
+            grains: GrainChunk {
+                grains,
+                stresses: grain_stress,
+                levels,
+                wall_histories: wall_history,
+                frames,
+                centers,
+                reach,
+                wraps,
+            },
             pair_states: pair_state,
             pair_active,
             pair_contacts,

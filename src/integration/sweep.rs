@@ -147,17 +147,11 @@ impl<'a, T> RowRuns<'a, T> {
 
 /// The rows of a world that the sweep writes: each grain chunk's rows and each chunk's pairs.
 pub(super) struct SweepRows<'a> {
-    pub grains: &'a mut [Grain],
-    pub stresses: &'a mut [GrainStress],
-    pub levels: &'a mut [GrainLevel],
-    pub wall_histories: &'a mut [[f64; MAX_WALLS]],
-    pub frames: &'a mut [Frame],
-    pub centers: &'a mut [DVec2],
-    pub reach: &'a mut [f64],
-    pub wraps: &'a mut [[i64; 2]],
+    /// Every grain's rows.
+    pub grains: GrainChunk<'a>,
     pub pair_states: &'a mut [PairState],
     pub pair_active: &'a mut [bool],
-    pub pair_contacts: &'a mut [super::PairContact],
+    pub pair_contacts: &'a mut [PairContact],
     /// Where each grain chunk's pairs end (see [`super::pair_chunk_ends`]).
     pub pair_chunk_ends: &'a [usize],
     /// The least first grain of each grain chunk's pairs ([`earliest_first_grains`]).
@@ -199,21 +193,31 @@ pub(super) fn sweep<'a>(
     passes: impl FnOnce(SweepViews<'a>) -> (PairPass<'a>, GrainPass<'a>),
 ) -> SweepResults {
     let chunks = rows.pair_chunk_ends.len();
-    let grains = rows.grains.len();
+    let GrainChunk {
+        grains,
+        stresses,
+        levels,
+        wall_histories,
+        frames,
+        centers,
+        reach,
+        wraps,
+    } = rows.grains;
+    let grain_count = grains.len();
     assert!(
-        chunks == grains.div_ceil(GRAIN_CHUNK)
+        chunks == grain_count.div_ceil(GRAIN_CHUNK)
             && rows.earliest_first_grains.len() == chunks
             && [
-                rows.stresses.len(),
-                rows.levels.len(),
-                rows.wall_histories.len(),
-                rows.frames.len(),
-                rows.centers.len(),
-                rows.reach.len(),
-                rows.wraps.len()
+                stresses.len(),
+                levels.len(),
+                wall_histories.len(),
+                frames.len(),
+                centers.len(),
+                reach.len(),
+                wraps.len()
             ]
             .iter()
-            .all(|&len| len == grains)
+            .all(|&len| len == grain_count)
             && rows.pair_states.len() == rows.pair_active.len()
             && rows.pair_active.len() == rows.pair_contacts.len()
             && rows
@@ -223,7 +227,7 @@ pub(super) fn sweep<'a>(
             && rows.pair_chunk_ends.is_sorted(),
         "the sweep's rows disagree with the chunks of the list"
     );
-    let frames = RowRuns::new(rows.frames);
+    let frames = RowRuns::new(frames);
     let pair_active = RowRuns::new(rows.pair_active);
     let pair_contacts = RowRuns::new(rows.pair_contacts);
     // SAFETY: the views and the runs cover the same rows; the order of the sweep (the module's
@@ -238,14 +242,14 @@ pub(super) fn sweep<'a>(
     };
     let (pair_pass, grain_pass) = passes(views);
     let writes = Writes {
-        grains: RowRuns::new(rows.grains),
-        stresses: RowRuns::new(rows.stresses),
-        levels: RowRuns::new(rows.levels),
-        wall_histories: RowRuns::new(rows.wall_histories),
+        grains: RowRuns::new(grains),
+        stresses: RowRuns::new(stresses),
+        levels: RowRuns::new(levels),
+        wall_histories: RowRuns::new(wall_histories),
         frames,
-        centers: RowRuns::new(rows.centers),
-        reach: RowRuns::new(rows.reach),
-        wraps: RowRuns::new(rows.wraps),
+        centers: RowRuns::new(centers),
+        reach: RowRuns::new(reach),
+        wraps: RowRuns::new(wraps),
         pair_states: RowRuns::new(rows.pair_states),
         pair_active,
         pair_contacts,
