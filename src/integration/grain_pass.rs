@@ -824,7 +824,7 @@ fn principal_directions_of_block(
 }
 
 /// How many grains ahead the pass one grain at a time asks for a grain's state (issue #16: at
-/// 10⁵ rigid discs, where a grain's turn is some 30 ns, 8 ahead stepped 1.07 times as fast as
+/// 10⁵ rigid discs, where a grain's turn is some 30 ns, 8 ahead stepped 1.05 times as fast as
 /// leaving it to the processor's own prefetching).
 const GRAIN_PREFETCH_AHEAD: usize = 8;
 

@@ -998,7 +998,7 @@ impl World {
         pair_cell: Option<(PeriodicCell, DMat2)>,
         carried_box: Option<((DVec2, DVec2), (DVec2, DVec2))>,
         cell_motion: Option<CellMotion>,
-    ) -> Result<(PairSums, Vec<ChunkSums>), Instability> {
+    ) -> Result<(PairSums, sweep::SweepResults), Instability> {
         let start = Instant::now();
         // The wraps are written by the pass in a periodic cell; elsewhere they are a scratch
         // row the chunks carry unread.
@@ -1099,7 +1099,7 @@ impl World {
         self.phase_times.pairs += swept.pair_share * seconds;
         self.phase_times.grains += (1.0 - swept.pair_share) * seconds;
         let mut totals = PairSums::default();
-        for sums in swept.pairs {
+        for sums in swept.pair_sums() {
             if let Some(f) = sums.failure {
                 // Some chunks' grains were updated and given their frames, others not: the
                 // frames are written afresh from the grains before another step.
@@ -1113,7 +1113,7 @@ impl World {
             totals.dissipation += sums.dissipation;
             totals.sliding += sums.sliding;
         }
-        Ok((totals, swept.grains))
+        Ok((totals, swept))
     }
 
     /// Advances the world by one time step: a plain step of `params.dt`, or a multi-rate cycle.
@@ -1152,7 +1152,7 @@ impl World {
             let area_before = periodic.cell(&self.walls).area();
             (periodic.advance(&mut self.walls, dt), area_before)
         });
-        let (pair_sums, chunk_sums) = self.pair_and_grain_passes(
+        let (pair_sums, swept) = self.pair_and_grain_passes(
             dt,
             None,
             pair_cell,
@@ -1166,7 +1166,7 @@ impl World {
             sliding_contacts: pair_sums.sliding,
             ..Default::default()
         };
-        let ends = self.add_grain_sums(&chunk_sums, &mut totals)?;
+        let ends = self.add_grain_sums(swept.grain_sums(), &mut totals)?;
         totals.contacts = ends.contact_ends / 2;
         match cell_motion {
             Some((motion, area_before)) => {
@@ -1203,14 +1203,14 @@ impl World {
         for second in [false, true] {
             let carried_box = self.carried_box(substep);
             let pair_cell = self.pair_cell();
-            let (pair_sums, chunk_sums) =
+            let (pair_sums, swept) =
                 self.pair_and_grain_passes(substep, Some(second), pair_cell, carried_box, None)?;
             let grains_start = Instant::now();
             if !second {
                 // The contacts capped at the cycle's start.
                 totals.capped_contacts = pair_sums.capped;
             }
-            let half = self.add_grain_sums(&chunk_sums, &mut totals)?;
+            let half = self.add_grain_sums(swept.grain_sums(), &mut totals)?;
             ends.contact_ends += half.contact_ends;
             self.move_walls(substep, carried_box);
             self.phase_times.grains += grains_start.elapsed().as_secs_f64();
@@ -1295,8 +1295,6 @@ impl World {
             .sum()
     }
 
-    /// The affine carry over `dt` in an affine phase (not in a periodic cell): from the box now
-    /// to the box after the walls' move.
     /// In a periodic cell, the cell where the pairs meet (at the start of the step, before it
     /// moves) and its velocity gradient.
     fn pair_cell(&self) -> Option<(PeriodicCell, DMat2)> {
@@ -1304,6 +1302,8 @@ impl World {
             .map(|p| (p.cell(&self.walls), p.velocity_gradient(&self.walls)))
     }
 
+    /// The affine carry over `dt` in an affine phase (not in a periodic cell): from the box now
+    /// to the box after the walls' move.
     fn carried_box(&self, dt: f64) -> Option<((DVec2, DVec2), (DVec2, DVec2))> {
         (self.affine_carry && self.periodic.is_none())
             .then(|| (box_corners(&self.walls), box_corners_after(&self.walls, dt)))
@@ -1321,15 +1321,15 @@ impl World {
 
     /// Adds the grain pass's chunk sums (in chunk order) to `totals`; returns its ends, or
     /// the first chunk's failure.
-    fn add_grain_sums(
+    fn add_grain_sums<'a>(
         &mut self,
-        chunk_sums: &[ChunkSums],
+        chunk_sums: impl Iterator<Item = &'a ChunkSums> + Clone,
         totals: &mut StepTotals,
     ) -> Result<PassEnds, Instability> {
         // Every grain was updated and given its next frame, failed steps included (a grain's
         // failure is reported after the pass).
         self.frames_current = true;
-        self.circle_frames = chunk_sums.iter().map(|sums| sums.circle_frames).sum();
+        self.circle_frames = chunk_sums.clone().map(|sums| sums.circle_frames).sum();
 
         let mut ends = PassEnds::default();
         for sums in chunk_sums {

@@ -1,7 +1,7 @@
 //! The pair pass and the grain pass of a step in one sweep over the grain chunks: a chunk's
 //! pairs (those whose first grain is one of its grains), then at once its grains, while the
 //! pairs' records and the grains' frames are still in cache (issue #16: at 10⁵ grains the two
-//! passes one after the other read every record back from memory; the sweep was 1.06 times as
+//! passes one after the other read every record back from memory; the sweep was 1.05 times as
 //! fast on the dense bench's full level, on one thread).
 //!
 //! A grain chunk needs the records of its grains' pairs: its own chunk's (the pairs `[g, j]`)
@@ -176,12 +176,23 @@ struct ChunkResults {
     grain_seconds: f64,
 }
 
-/// What a sweep leaves: each chunk's pair sums and grain sums, in chunk order, and the share
-/// of its time the pair pass took.
+/// What a sweep leaves: each chunk's results, in chunk order, and the share of its time the
+/// pair pass took.
 pub(super) struct SweepResults {
-    pub pairs: Vec<PairSums>,
-    pub grains: Vec<ChunkSums>,
+    chunks: Vec<ChunkResults>,
     pub pair_share: f64,
+}
+
+impl SweepResults {
+    /// Each chunk's pair sums, in chunk order.
+    pub fn pair_sums(&self) -> impl Iterator<Item = &PairSums> {
+        self.chunks.iter().map(|chunk| &chunk.pairs)
+    }
+
+    /// Each chunk's grain sums, in chunk order: every chunk's, unless a pair failed.
+    pub fn grain_sums(&self) -> impl Iterator<Item = &ChunkSums> + Clone {
+        self.chunks.iter().filter_map(|chunk| chunk.grains.as_ref())
+    }
 }
 
 /// The pair pass and the grain pass over every chunk (see the module's docs): `passes` makes
@@ -299,16 +310,10 @@ pub(super) fn sweep<'a>(
     let (pair_seconds, grain_seconds) = results.iter().fold((0.0, 0.0), |(p, g), result| {
         (p + result.pair_seconds, g + result.grain_seconds)
     });
-    let mut swept = SweepResults {
-        pairs: Vec::with_capacity(chunks),
-        grains: Vec::with_capacity(chunks),
+    SweepResults {
+        chunks: results,
         pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
-    };
-    for result in results {
-        swept.pairs.push(result.pairs);
-        swept.grains.extend(result.grains);
     }
-    swept
 }
 
 /// How the sweep's tasks share the chunks.
