@@ -108,7 +108,36 @@ pub(super) fn advance_full_block(
         assert!(blocks_available());
         // SAFETY: the processor has AVX (asserted just above), and the slices hold four
         // records each.
-        unsafe { avx::advance_full_block(grains, stresses, frames, loads, contacts, e1, constants) }
+        unsafe {
+            avx::advance_block::<false>(grains, stresses, frames, loads, contacts, e1, constants)
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!("blocks run on x86-64 only")
+}
+
+/// Advances the four rigid-level grains `grains` over a plain step as
+/// [`advance_full_block`] does full-level ones: the stresses and the rigid-body motion of the
+/// one-grain update at the rigid level, bit for bit, and their stress records. Their frames
+/// are left to the caller (a rigid grain's may be a circle's). Only where
+/// [`blocks_available`] says so.
+#[inline(always)]
+pub(super) fn advance_rigid_block(
+    grains: &mut [Grain],
+    stresses: &mut [GrainStress],
+    loads: &BlockLoads,
+    contacts: &[[u32; 2]; BLOCK_GRAINS],
+    constants: &BlockConstants<'_>,
+) -> BlockOutcome {
+    assert!(grains.len() == BLOCK_GRAINS && stresses.len() == BLOCK_GRAINS);
+    #[cfg(target_arch = "x86_64")]
+    {
+        assert!(blocks_available());
+        // SAFETY: the processor has AVX (asserted just above), and the slices hold four
+        // records each; a rigid block reads no frame and no direction.
+        unsafe {
+            avx::advance_block::<true>(grains, stresses, &mut [], loads, contacts, &[], constants)
+        }
     }
     #[cfg(not(target_arch = "x86_64"))]
     unreachable!("blocks run on x86-64 only")
@@ -152,9 +181,10 @@ struct OutcomeLanes<T> {
 }
 
 /// The update's arithmetic, lane by lane as the one-grain update (`advance_grain`) at the full
-/// level: the order of every operation is that function's (and glam's inside it).
+/// level, or at the rigid level where `RIGID` (the stresses and the rigid-body motion only,
+/// `e1` unread): the order of every operation is that function's (and glam's inside it).
 #[inline(always)]
-fn advance_lanes<T: Real>(
+fn advance_lanes<T: Real, const RIGID: bool>(
     dofs: &mut DofLanes<T>,
     load: &LoadLanes<T>,
     e1: [T; 2],
@@ -178,12 +208,6 @@ fn advance_lanes<T: Real>(
     let xx = half * (m11 + m11) * inv_area;
     let yy = half * (m22 + m22) * inv_area;
     let xy = half * (m21 + m12) * inv_area;
-    let e2 = [-e1[1], e1[0]];
-    // glam's `DMat2 * DVec2` of the symmetric stress, and `DVec2::dot`.
-    let apply = |v: [T; 2]| [xx * v[0] + xy * v[1], xy * v[0] + yy * v[1]];
-    let dot = |a: [T; 2], b: [T; 2]| a[0] * b[0] + a[1] * b[1];
-    let on_e2 = apply(e2);
-    let (ext11, ext22, ext12) = (dot(e1, apply(e1)), dot(e2, on_e2), dot(e1, on_e2));
     let moduli = &update.moduli;
     let (sigma1, sigma2) = principal_stress(moduli, dofs.eps1, dofs.eps2, lost_fraction);
     let elastic_energy =
@@ -207,8 +231,24 @@ fn advance_lanes<T: Real>(
         dofs.center[axis] = dofs.center[axis] + dofs.velocity[axis] * dt;
     }
     dofs.theta = dofs.theta + dofs.omega * dt;
+    let outcome = OutcomeLanes {
+        external: [xx, yy, xy],
+        principal: [sigma1, sigma2],
+        area,
+        elastic_energy,
+        mass,
+    };
+    if RIGID {
+        return outcome;
+    }
 
-    // Deformation at the full level.
+    // Deformation at the full level, driven by the stresses in the principal frame {e1, e2}.
+    let e2 = [-e1[1], e1[0]];
+    // glam's `DMat2 * DVec2` of the symmetric stress, and `DVec2::dot`.
+    let apply = |v: [T; 2]| [xx * v[0] + xy * v[1], xy * v[0] + yy * v[1]];
+    let dot = |a: [T; 2], b: [T; 2]| a[0] * b[0] + a[1] * b[1];
+    let on_e2 = apply(e2);
+    let (ext11, ext22, ext12) = (dot(e1, apply(e1)), dot(e2, on_e2), dot(e1, on_e2));
     let inv_modal_mass =
         splat(4.0) / (density * radius * radius * splat(params.deformation_mass_scale));
     let damping = splat(params.deformation_damping);
@@ -236,19 +276,13 @@ fn advance_lanes<T: Real>(
         dofs.eps1_rate = mean_rate + half_difference_rate;
         dofs.eps2_rate = mean_rate - half_difference_rate;
     }
-    OutcomeLanes {
-        external: [xx, yy, xy],
-        principal: [sigma1, sigma2],
-        area,
-        elastic_energy,
-        mass,
-    }
+    outcome
 }
 
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_op_in_unsafe_fn)]
 mod avx {
-    // The helpers run AVX instructions: every one is inlined into `advance_full_block`, which
+    // The helpers run AVX instructions: every one is inlined into `advance_block`, which
     // is compiled for AVX and called only where the processor has it.
     use super::*;
     use crate::lanes::avx::transpose;
@@ -357,13 +391,15 @@ mod avx {
         _mm256_store_pd(lanes.0.as_mut_ptr(), v.0)
     }
 
-    /// See [`super::advance_full_block`].
+    /// See [`super::advance_full_block`]; where `RIGID`, [`super::advance_rigid_block`]
+    /// (`frames` and `e1` unread).
     ///
     /// # Safety
-    /// The processor must have AVX, and `grains` must hold four records.
+    /// The processor must have AVX, and `grains` and `stresses` must hold four records each,
+    /// `frames` and `e1` too unless `RIGID`.
     #[target_feature(enable = "avx")]
     #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn advance_full_block(
+    pub(super) unsafe fn advance_block<const RIGID: bool>(
         grains: &mut [Grain],
         stresses: &mut [GrainStress],
         frames: &mut [Frame],
@@ -399,20 +435,24 @@ mod avx {
             alpha,
             alpha_rate,
         };
-        // The directions `[c0, s0, c1, s1]`, `[c2, s2, c3, s3]` to cosines and sines.
-        let directions = e1.as_ptr().cast::<f64>();
-        let (first, second) = (
-            _mm256_loadu_pd(directions),
-            _mm256_loadu_pd(directions.add(4)),
-        );
-        let (low, high) = (
-            _mm256_permute2f128_pd(first, second, 0x20),
-            _mm256_permute2f128_pd(first, second, 0x31),
-        );
-        let e1 = [
-            F64x4(_mm256_unpacklo_pd(low, high)),
-            F64x4(_mm256_unpackhi_pd(low, high)),
-        ];
+        let e1 = if RIGID {
+            [F64x4::splat(0.0); 2]
+        } else {
+            // The directions `[c0, s0, c1, s1]`, `[c2, s2, c3, s3]` to cosines and sines.
+            let directions = e1.as_ptr().cast::<f64>();
+            let (first, second) = (
+                _mm256_loadu_pd(directions),
+                _mm256_loadu_pd(directions.add(4)),
+            );
+            let (low, high) = (
+                _mm256_permute2f128_pd(first, second, 0x20),
+                _mm256_permute2f128_pd(first, second, 0x31),
+            );
+            [
+                F64x4(_mm256_unpacklo_pd(low, high)),
+                F64x4(_mm256_unpackhi_pd(low, high)),
+            ]
+        };
         let load_lanes = LoadLanes {
             force: [load(&loads.force[0]), load(&loads.force[1])],
             torque: load(&loads.torque),
@@ -422,23 +462,27 @@ mod avx {
             ],
             lost_area: load(&loads.lost_area),
         };
-        let lanes = advance_lanes(&mut dofs, &load_lanes, e1, constants);
+        let lanes = advance_lanes::<F64x4, RIGID>(&mut dofs, &load_lanes, e1, constants);
         let d = dofs;
         let quarters = [
             [d.radius, d.center[0], d.center[1], d.velocity[0]],
             [d.velocity[1], d.theta, d.omega, d.eps1],
             [d.eps1_rate, d.eps2, d.eps2_rate, d.alpha],
         ];
-        for (quarter, fields) in quarters.into_iter().enumerate() {
+        // A rigid grain's strains, their rates and alpha's are as they were: not written back.
+        let changed = if RIGID { 2 } else { 3 };
+        for (quarter, fields) in quarters.into_iter().enumerate().take(changed) {
             let rows = transpose(fields.map(|f| f.0));
             for (l, row) in rows.into_iter().enumerate() {
                 _mm256_storeu_pd(base.add(13 * l + 4 * quarter), row);
             }
         }
-        let mut alpha_rate = GrainLanes::default();
-        store(d.alpha_rate, &mut alpha_rate);
-        for (l, &rate) in alpha_rate.0.iter().enumerate() {
-            *base.add(13 * l + 12) = rate;
+        if !RIGID {
+            let mut alpha_rate = GrainLanes::default();
+            store(d.alpha_rate, &mut alpha_rate);
+            for (l, &rate) in alpha_rate.0.iter().enumerate() {
+                *base.add(13 * l + 12) = rate;
+            }
         }
 
         // The checks' filter: a sum of the twelve values is finite only if each is; then the
@@ -488,6 +532,11 @@ mod avx {
             (*record).contacts = contacts[l][0];
             (*record).wall_contacts = contacts[l][1];
         }
+        store(lanes.area, &mut outcome.area);
+        store(lanes.elastic_energy, &mut outcome.elastic_energy);
+        if RIGID {
+            return outcome;
+        }
 
         // The frames: the angles' sines and cosines and the affine maps in lanes
         // (`Frame::write_full_block`'s function), then each grain's two lines.
@@ -534,9 +583,6 @@ mod avx {
                 _mm256_storeu_pd(frame_words.add(16 * l + 4 * quarter), row);
             }
         }
-
-        store(lanes.area, &mut outcome.area);
-        store(lanes.elastic_energy, &mut outcome.elastic_energy);
         outcome
     }
 }

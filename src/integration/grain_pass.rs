@@ -4,7 +4,9 @@
 //! while they are still in cache, deforming grains four at a time (see
 //! [`World::frames_current`](super::World)).
 
-use super::grain_block::{BLOCK_GRAINS, BlockConstants, BlockLoads, advance_full_block};
+use super::grain_block::{
+    BLOCK_GRAINS, BlockConstants, BlockLoads, advance_full_block, advance_rigid_block,
+};
 use super::sweep::SharedRows;
 use super::{
     BoxCarry, ChunkSums, FRAME_LANES, Frame, GRAIN_CHUNK, GrainStress, Instability, MAX_WALLS,
@@ -140,24 +142,30 @@ impl GrainPass<'_> {
         } else {
             &[]
         };
-        // A chunk with full-level grains, on a plain step, goes by blocks of four: those whose
-        // grains are all at the full level have their updates run side by side in lanes, the
-        // others go one by one. Any other chunk goes one by one.
-        let full = if self.blocks {
-            chunk
-                .levels
-                .iter()
-                .filter(|level| level.level == ModelLevel::Full)
-                .count()
+        // A chunk with full-level or rigid grains, on a plain step, goes by blocks of four:
+        // those whose grains are all at the full level, or all at the rigid level, have their
+        // updates run side by side in lanes, the others go one by one. Any other chunk goes one
+        // by one.
+        let (mut full, mut rigid) = (0, 0);
+        if self.blocks {
+            for level in chunk.levels.iter() {
+                full += (level.level == ModelLevel::Full) as usize;
+                rigid += (level.level == ModelLevel::Rigid) as usize;
+            }
+        }
+        let n = chunk.grains.len();
+        let chunk_level = if full == n {
+            Some(ModelLevel::Full)
+        } else if rigid == n {
+            Some(ModelLevel::Rigid)
         } else {
-            0
+            None
         };
-        let all_full = full == chunk.grains.len();
-        let blocks_done = if full > 0 {
+        let blocks_done = if full + rigid > 0 {
             self.by_blocks(
                 first,
                 &mut chunk,
-                all_full,
+                chunk_level,
                 chunk_walls,
                 &near_wall,
                 &constants,
@@ -272,20 +280,21 @@ impl GrainPass<'_> {
     }
 
     /// A chunk's grains on a plain step by blocks of [`BLOCK_GRAINS`]. A block whose grains are
-    /// all at the full level: its contact loads first, grain by grain, then their updates side
-    /// by side ([`advance_full_block`], which writes their frames too), then each grain's
-    /// adaptive level, checks, sums and failures in grain order (a grain's first wall failure
-    /// before its update's, as one by one). Any other block, and the chunk's last grains, one
-    /// by one ([`GrainPass::one_grain`]). `all_full`: every grain of the chunk is at the full
-    /// level. Returns the blocks that wrote their grains' frames, bit `b` for the grains `4 b`
-    /// to `4 b + 3`.
+    /// all at the full level, or all at the rigid level: its contact loads first, grain by
+    /// grain, then their updates side by side ([`advance_full_block`], which writes their
+    /// frames too, or [`advance_rigid_block`], which leaves them to [`write_frames`]), then
+    /// each grain's adaptive level, checks, sums and failures in grain order (a grain's first
+    /// wall failure before its update's, as one by one). Any other block, and the chunk's last
+    /// grains, one by one ([`GrainPass::one_grain`]). `chunk_level`: the level of every grain
+    /// of the chunk, if they share one. Returns the blocks that wrote their grains' frames, bit
+    /// `b` for the grains `4 b` to `4 b + 3`.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     fn by_blocks(
         &self,
         first: usize,
         chunk: &mut GrainChunk<'_>,
-        all_full: bool,
+        chunk_level: Option<ModelLevel>,
         chunk_walls: &[Wall],
         near_wall: &[bool; MAX_WALLS],
         constants: &UpdateConstants,
@@ -300,33 +309,55 @@ impl GrainPass<'_> {
             dt: self.dt,
         };
         let n = chunk.grains.len();
+        let grains_at = chunk.grains.as_ptr();
+        let stresses_at = chunk.stresses.as_ptr();
         let mut done = 0;
         for start in (0..n).step_by(BLOCK_GRAINS) {
             let block = start..(start + BLOCK_GRAINS).min(n);
-            if block.len() < BLOCK_GRAINS
-                || !all_full
-                    && chunk.levels[block.clone()]
-                        .iter()
-                        .any(|level| level.level != ModelLevel::Full)
-            {
-                for k in block {
-                    self.one_grain(
-                        first + k,
-                        &mut chunk.grains[k],
-                        &mut chunk.stresses[k],
-                        &mut chunk.levels[k],
-                        &mut chunk.wall_histories[k],
-                        &chunk.frames[k],
-                        &mut chunk.wraps[k],
-                        chunk_walls,
-                        near_wall,
-                        constants,
-                        directions[k],
-                        sums,
-                    );
-                }
-                continue;
+            // The states of the grains ahead, and the stress records they will write, as one by
+            // one.
+            let ahead = block.start + GRAIN_PREFETCH_AHEAD;
+            for k in ahead..ahead + BLOCK_GRAINS {
+                prefetch_grain(grains_at, k);
             }
+            let stresses_ahead = stresses_at.wrapping_add(ahead).cast::<u8>();
+            for line in 0..(BLOCK_GRAINS * size_of::<GrainStress>()).div_ceil(64) {
+                prefetch_address(stresses_ahead.wrapping_add(64 * line));
+            }
+            let block_level = if block.len() < BLOCK_GRAINS {
+                None
+            } else if chunk_level.is_some() {
+                chunk_level
+            } else {
+                let first_level = chunk.levels[block.start].level;
+                chunk.levels[block.clone()]
+                    .iter()
+                    .all(|level| level.level == first_level)
+                    .then_some(first_level)
+            };
+            let rigid = match block_level {
+                Some(ModelLevel::Full) => false,
+                Some(ModelLevel::Rigid) => true,
+                _ => {
+                    for k in block {
+                        self.one_grain(
+                            first + k,
+                            &mut chunk.grains[k],
+                            &mut chunk.stresses[k],
+                            &mut chunk.levels[k],
+                            &mut chunk.wall_histories[k],
+                            &chunk.frames[k],
+                            &mut chunk.wraps[k],
+                            chunk_walls,
+                            near_wall,
+                            constants,
+                            directions[k],
+                            sums,
+                        );
+                    }
+                    continue;
+                }
+            };
             let mut loads = BlockLoads::default();
             let mut contacts = [[0u32; 2]; BLOCK_GRAINS];
             // The block's first wall failure and its grain: a later one would never be kept.
@@ -352,16 +383,26 @@ impl GrainPass<'_> {
                 loads.set_lane(l, &load);
                 *lane_contacts = [load.contacts, load.wall_contacts];
             }
-            let outcome = advance_full_block(
-                &mut chunk.grains[block.clone()],
-                &mut chunk.stresses[block.clone()],
-                &mut chunk.frames[block.clone()],
-                &loads,
-                &contacts,
-                &directions[block],
-                &block_constants,
-            );
-            done |= 1 << (start / BLOCK_GRAINS);
+            let outcome = if rigid {
+                advance_rigid_block(
+                    &mut chunk.grains[block.clone()],
+                    &mut chunk.stresses[block.clone()],
+                    &loads,
+                    &contacts,
+                    &block_constants,
+                )
+            } else {
+                done |= 1 << (start / BLOCK_GRAINS);
+                advance_full_block(
+                    &mut chunk.grains[block.clone()],
+                    &mut chunk.stresses[block.clone()],
+                    &mut chunk.frames[block.clone()],
+                    &loads,
+                    &contacts,
+                    &directions[block],
+                    &block_constants,
+                )
+            };
             for (l, [pair_contacts, _]) in contacts.into_iter().enumerate() {
                 let (k, g) = (start + l, first + start + l);
                 let (grain, level) = (&mut chunk.grains[k], &mut chunk.levels[k]);
@@ -397,6 +438,10 @@ impl GrainPass<'_> {
                 sums.totals.elastic_energy += outcome.elastic_energy.0[l];
                 sums.contact_ends += pair_contacts as u64;
                 self.follow_box(grain, &mut chunk.wraps[k], sums);
+                if rigid {
+                    // `write_frames` writes its frame, as one by one.
+                    continue;
+                }
                 let frame = &mut chunk.frames[k];
                 if stepped_down {
                     frame.write(grain, level.level, density);
@@ -1240,13 +1285,14 @@ mod tests {
     #[test]
     fn a_block_gives_each_grain_the_one_grain_updates_bits() {
         // Expectation: a block's lanes are four one-grain updates side by side (`advance_grain`
-        // at the full level, then `Frame::of_grain` of the updated grain): every field of the
-        // grains, their stress records, areas, elastic energies and next frames bit for bit,
+        // at the full level, then `Frame::of_grain` of the updated grain; or at the rigid
+        // level): every field of the grains, their stress records, areas, elastic energies
+        // and (full level) next frames bit for bit,
         // compressible and incompressible, with and without gravity, strain differences on
         // both sides of k_alpha's threshold (zero included). A grain the one-grain checks fail
         // is flagged for them.
         use super::super::grain_block::{
-            BLOCK_GRAINS, BlockLoads, advance_full_block, blocks_available,
+            BLOCK_GRAINS, BlockLoads, advance_full_block, advance_rigid_block, blocks_available,
         };
         use crate::grain::constitutive::Material;
         use crate::sample::unit_random;
@@ -1388,9 +1434,66 @@ mod tests {
                         assert_eq!(suspect, updates[l].result.is_err(), "{at}");
                     }
                 }
+
+                // The same grains at the rigid level: the rigid block against the one-grain
+                // update at that level (which reads no principal direction); frames are the
+                // caller's.
+                let mut one_by_one = grains;
+                let updates: Vec<GrainUpdate> = (0..BLOCK_GRAINS)
+                    .map(|l| {
+                        advance_grain(
+                            &params,
+                            params.dt,
+                            1,
+                            &mut one_by_one[l],
+                            &mut GrainLevel::new(ModelLevel::Rigid),
+                            &loads[l],
+                            &constants,
+                            DVec2::ZERO,
+                            l,
+                            7,
+                        )
+                    })
+                    .collect();
+                let mut block = grains;
+                let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
+                let outcome = advance_rigid_block(
+                    &mut block,
+                    &mut stresses,
+                    &block_loads,
+                    &contacts,
+                    &block_constants,
+                );
+                for l in 0..BLOCK_GRAINS {
+                    let at = format!("rigid: case {case}, trial {trial}, lane {l}");
+                    assert_eq!(grain_bits(&block[l]), grain_bits(&one_by_one[l]), "{at}");
+                    assert_eq!(
+                        stress_bits(&stresses[l]),
+                        stress_bits(&updates[l].stress),
+                        "{at}"
+                    );
+                    assert_eq!(bits(outcome.area.0[l]), bits(updates[l].area), "{at}");
+                    assert_eq!(
+                        bits(outcome.elastic_energy.0[l]),
+                        bits(updates[l].elastic_energy),
+                        "{at}"
+                    );
+                    let suspect = outcome.suspect & (1 << l) != 0;
+                    if updates[l].result.is_err() {
+                        assert!(suspect, "{at}: a failed grain not flagged");
+                        flagged += 1;
+                    }
+                    if (10..=12).contains(&trial) {
+                        assert_eq!(suspect, updates[l].result.is_err(), "{at}");
+                    }
+                }
             }
         }
-        assert_eq!(flagged, 3 * 3, "each case's three failing grains");
+        assert_eq!(
+            flagged,
+            2 * 3 * 3,
+            "each case's three failing grains, at either level"
+        );
     }
 
     #[test]

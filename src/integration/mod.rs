@@ -1006,10 +1006,10 @@ impl World {
         let every_frame_a_circle = self.frames_all_circles();
         let no_frame_a_circle = self.frames_no_circle();
         let step = self.step;
-        // Full-level grains are in a world at that level or with adaptive levels.
+        // Full-level and rigid grains are in a world at either level or with adaptive levels.
         let blocks = self.grain_blocks
             && cycle.is_none()
-            && (self.params.level == ModelLevel::Full || self.params.adaptive.is_some())
+            && (self.params.level != ModelLevel::Volumetric || self.params.adaptive.is_some())
             && grain_block::blocks_available();
         let World {
             params,
@@ -1646,7 +1646,8 @@ mod tests {
         // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
         // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down;
-        // and a step that fails reports the same first failure.
+        // rigid discs alike (their blocks' frames written after them); and a step that fails
+        // reports the same first failure.
         use crate::contact::friction::FrictionSettings;
         use crate::integration::parameters::Friction;
         if !grain_block::blocks_available() {
@@ -1660,9 +1661,19 @@ mod tests {
                 .map(f64::to_bits)
                 .collect()
         };
-        for case in ["affine box", "friction", "periodic cell", "adaptive levels"] {
+        for case in [
+            "affine box",
+            "friction",
+            "periodic cell",
+            "adaptive levels",
+            "rigid discs",
+            "rigid discs with friction in a periodic cell",
+        ] {
             let mut world = squeezed_packing(603);
             assert!(world.params.level == ModelLevel::Full && world.params.adaptive.is_none());
+            if case.starts_with("rigid") {
+                crate::run::bench::with_model(&mut world, ModelLevel::Rigid);
+            }
             match case {
                 "affine box" => world.affine_carry = true,
                 "friction" => {
@@ -1674,6 +1685,19 @@ mod tests {
                     world.params.friction = Friction::new(&settings, &[0.3; 4]);
                 }
                 "periodic cell" => {
+                    world = world.with_periodic(PeriodicBoundary {
+                        shear_rate: 1e-3,
+                        ..Default::default()
+                    })
+                }
+                "rigid discs" => world.affine_carry = true,
+                "rigid discs with friction in a periodic cell" => {
+                    let settings = FrictionSettings {
+                        grains: 0.4,
+                        damping: 0.3,
+                        ..Default::default()
+                    };
+                    world.params.friction = Friction::new(&settings, &[0.3; 4]);
                     world = world.with_periodic(PeriodicBoundary {
                         shear_rate: 1e-3,
                         ..Default::default()
