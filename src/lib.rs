@@ -14,13 +14,15 @@
 //! loading programs), [`sample`] (initial packings), [`scenario`] (RON input), [`output`]
 //! (measures, CSV files, MCAP logs, pictures and plots), [`run`] (a scenario from start to end,
 //! checkpoints, the bench), [`meshfree`] (the single-grain meshfree reference solver) and
-//! [`calibration`] (fitting the contact law to it).
+//! [`calibration`] (fitting the contact law to it); [`huge_pages`], the command line's
+//! allocator.
 
 pub mod boundary;
 pub mod calibration;
 pub mod contact;
 pub mod geometry;
 pub mod grain;
+pub mod huge_pages;
 pub mod integration;
 pub mod lanes;
 pub mod meshfree;

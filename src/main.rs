@@ -13,6 +13,10 @@ use sdem::scenario::{CheckpointInterval, Scenario};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
+/// Large arrays in huge pages: 1.02-1.05 times the step rate at 10^5 grains (see the module).
+#[global_allocator]
+static ALLOCATOR: sdem::huge_pages::HugePageAllocator = sdem::huge_pages::HugePageAllocator;
+
 #[derive(Parser)]
 #[command(
     name = "sdem",
