@@ -51,7 +51,7 @@ fn rolling_s(model: &str, mu: f64) -> f64 {
     let end = 0.02;
     while world.time < end {
         world.step().unwrap();
-        if world.step % 100 == 0 {
+        if world.step.is_multiple_of(100) {
             let t = world.time;
             let d = (world.grains()[0].center - start).dot(downhill);
             moment += d * t * t;

@@ -1100,8 +1100,8 @@ impl Assembly {
                     stalled_steps + 1
                 };
                 lowest_norm = lowest_norm.min(norm);
-                if stalled_steps >= STALLED_STEPS_BEFORE_LINE_SEARCH {
-                    if let Some(shorter) = self.shorter_newton_step(
+                if stalled_steps >= STALLED_STEPS_BEFORE_LINE_SEARCH
+                    && let Some(shorter) = self.shorter_newton_step(
                         &start,
                         &du,
                         applied,
@@ -1110,13 +1110,13 @@ impl Assembly {
                         friction,
                         k,
                         dynamic,
-                    )? {
-                        *u = shorter.u;
-                        eval = shorter.eval;
-                        norm = shorter.norm;
-                        applied = shorter.alpha;
-                        stalled_steps = 0;
-                    }
+                    )?
+                {
+                    *u = shorter.u;
+                    eval = shorter.eval;
+                    norm = shorter.norm;
+                    applied = shorter.alpha;
+                    stalled_steps = 0;
                 }
             }
             last_correction = applied * du.iter().fold(0.0f64, |m, v| m.max(v.abs()));

@@ -46,7 +46,7 @@ impl DiscNodes {
                 "disc radius must be positive and finite, got {radius}"
             )));
         }
-        if nb < 8 || nb % 4 != 0 {
+        if nb < 8 || !nb.is_multiple_of(4) {
             return Err(MeshfreeError::BadInput(format!(
                 "boundary_nodes must be a multiple of 4 and at least 8, got {nb}"
             )));
@@ -69,7 +69,7 @@ impl DiscNodes {
             } else {
                 4 * ((2.0 * std::f64::consts::PI * r / s / 4.0).round() as usize).max(1)
             };
-            let offset = if ring % 2 == 0 { 0.0 } else { 0.5 };
+            let offset = if ring.is_multiple_of(2) { 0.0 } else { 0.5 };
             for j in 0..n {
                 let t = 2.0 * std::f64::consts::PI * (j as f64 + offset) / n as f64;
                 positions.push([r * cos(t), r * sin(t)]);

@@ -1050,7 +1050,7 @@ pub fn place_nodes(
 
     if let StarShape::Disc { radius } = shape {
         let nb = (TAU * radius / spacing).round() as usize;
-        if nb >= 8 && nb % 4 == 0 {
+        if nb >= 8 && nb.is_multiple_of(4) {
             let d = DiscNodes::disc(
                 *radius,
                 NodeDensity {

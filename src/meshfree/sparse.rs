@@ -386,7 +386,7 @@ pub fn synthetic_multi_grain(
     seed: u64,
 ) -> TripletMatrix {
     use rand::SeedableRng;
-    assert!(dofs_per_block % 2 == 0, "2 DoF per node");
+    assert!(dofs_per_block.is_multiple_of(2), "2 DoF per node");
     let nodes = dofs_per_block / 2;
     assert!(neighbours < nodes, "more neighbours than nodes in a block");
     assert!(contacts == 0 || blocks >= 2, "contacts need two grains");

@@ -264,7 +264,7 @@ impl<'a> Run<'a> {
 
     /// Whether this step is one of the regular output steps.
     pub(super) fn row_due<S: Simulation>(&self, sim: &S) -> bool {
-        sim.step_count() % self.every == 0
+        sim.step_count().is_multiple_of(self.every)
     }
 
     /// Detect jamming (SPEC §7): the first state with p_c > p_jam that carries on. A collision
@@ -401,7 +401,7 @@ impl<'a> Run<'a> {
             .is_some_and(|s| s.load(Ordering::Relaxed))
             || options.stop_after_step == Some(step);
         if stop_requested
-            || (options.checkpoint_every > 0 && step % options.checkpoint_every == 0)
+            || (options.checkpoint_every > 0 && step.is_multiple_of(options.checkpoint_every))
             || options
                 .checkpoint_seconds
                 .is_some_and(|s| self.last_checkpoint.elapsed().as_secs_f64() >= s)

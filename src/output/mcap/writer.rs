@@ -436,7 +436,7 @@ impl TrajectoryWriter {
         encode_macro(&mut buf, row);
         self.put(self.macro_row, log_time, &buf)?;
         self.buf = buf;
-        if self.scene_every > 0 && self.frames % self.scene_every == 0 {
+        if self.scene_every > 0 && self.frames.is_multiple_of(self.scene_every) {
             let mut text = std::mem::take(&mut self.text);
             scene(&mut text);
             self.put(self.scene, log_time, text.as_bytes())?;
