@@ -58,7 +58,8 @@ fn colour_offset() -> usize {
 /// needs.
 #[inline]
 fn huge_layout(layout: Layout) -> Option<Layout> {
-    if layout.size() < HUGE_ARRAY_BYTES || layout.align() > COLOUR_STRIDE {
+    // The colour offsets must keep the caller's alignment: 4288 = 64 x 67 keeps 64 bytes'.
+    if layout.size() < HUGE_ARRAY_BYTES || COLOUR_STRIDE % layout.align() != 0 {
         return None;
     }
     let size = layout
@@ -97,7 +98,8 @@ unsafe impl GlobalAlloc for HugePageAllocator {
                 }
                 advise_huge_pages(start, huge.size());
                 // The offset is a multiple of COLOUR_STRIDE, hence of the caller's alignment
-                // (`huge_layout` takes none larger), and leaves room for `layout.size()` bytes.
+                // (`huge_layout` takes only alignments that divide it), and leaves room for
+                // `layout.size()` bytes.
                 unsafe { start.add(colour_offset()) }
             }
         }
@@ -156,16 +158,20 @@ mod tests {
 
     #[test]
     fn large_arrays_get_huge_pages_of_their_own_colour_and_keep_their_contents() {
-        // Expectation: below the threshold the caller's layout is kept; from it on, the
-        // system's allocation starts on a huge page and spans whole ones, with room for the
-        // array past its colour offset (a multiple of the colour stride, different for two
-        // arrays in a row); values survive growth across the threshold and back (realloc),
-        // and zeroed allocations read zero.
+        // Expectation: below the threshold, or at an alignment of more than 64 bytes, the
+        // caller's layout is kept; from the threshold on, the system's allocation starts on a
+        // huge page and spans whole ones, with room for the array past its colour offset (a
+        // multiple of the colour stride, different for two arrays in a row); values survive
+        // growth across the threshold and back (realloc), and zeroed allocations read zero.
         assert_eq!(huge_layout(Layout::new::<[u8; 64]>()), None);
         let big = Layout::from_size_align(HUGE_ARRAY_BYTES + 1, 8).unwrap();
         let huge = huge_layout(big).unwrap();
         assert_eq!(huge.align(), HUGE_PAGE_BYTES);
         assert_eq!(huge.size(), HUGE_ARRAY_BYTES + HUGE_PAGE_BYTES);
+        for align in [128, 4096, 8192] {
+            let aligned = Layout::from_size_align(HUGE_ARRAY_BYTES, align).unwrap();
+            assert_eq!(huge_layout(aligned), None, "an alignment the colours would break");
+        }
         let tight = Layout::from_size_align(3 * HUGE_PAGE_BYTES - 1000, 64).unwrap();
         let huge = huge_layout(tight).unwrap();
         assert_eq!(huge.size(), 4 * HUGE_PAGE_BYTES, "room for the colours");
