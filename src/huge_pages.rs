@@ -170,7 +170,11 @@ mod tests {
         assert_eq!(huge.size(), HUGE_ARRAY_BYTES + HUGE_PAGE_BYTES);
         for align in [128, 4096, 8192] {
             let aligned = Layout::from_size_align(HUGE_ARRAY_BYTES, align).unwrap();
-            assert_eq!(huge_layout(aligned), None, "an alignment the colours would break");
+            assert_eq!(
+                huge_layout(aligned),
+                None,
+                "an alignment the colours would break"
+            );
         }
         let tight = Layout::from_size_align(3 * HUGE_PAGE_BYTES - 1000, 64).unwrap();
         let huge = huge_layout(tight).unwrap();
