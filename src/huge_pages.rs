@@ -59,7 +59,7 @@ fn colour_offset() -> usize {
 #[inline]
 fn huge_layout(layout: Layout) -> Option<Layout> {
     // The colour offsets must keep the caller's alignment: 4288 = 64 x 67 keeps 64 bytes'.
-    if layout.size() < HUGE_ARRAY_BYTES || COLOUR_STRIDE % layout.align() != 0 {
+    if layout.size() < HUGE_ARRAY_BYTES || !COLOUR_STRIDE.is_multiple_of(layout.align()) {
         return None;
     }
     let size = layout

@@ -1311,7 +1311,8 @@ mod tests {
         // both sides of k_alpha's threshold (zero included). A grain the one-grain checks fail
         // is flagged for them.
         use super::super::grain_block::{
-            BLOCK_GRAINS, BlockLoads, advance_full_block, advance_rigid_block, blocks_available,
+            BLOCK_GRAINS, BlockLoads, BlockOutcome, advance_full_block, advance_rigid_block,
+            blocks_available,
         };
         use crate::grain::constitutive::Material;
         use crate::sample::unit_random;
@@ -1392,31 +1393,73 @@ mod tests {
                     wall_contacts: l as u32 % 2,
                 });
                 let directions = grains.map(|g| g.principal_direction());
-
-                let mut one_by_one = grains;
-                let updates: Vec<GrainUpdate> = (0..BLOCK_GRAINS)
-                    .map(|l| {
-                        advance_grain(
-                            &params,
-                            params.dt,
-                            1,
-                            &mut one_by_one[l],
-                            &mut GrainLevel::new(ModelLevel::Full),
-                            &loads[l],
-                            &constants,
-                            directions[l],
-                            l,
-                            7,
-                        )
-                    })
-                    .collect();
-
-                let mut block = grains;
+                // Each grain's one-grain update at `level` (`directions` read at the full level
+                // only), and the updated grains.
+                let one_by_one = |level: ModelLevel| {
+                    let mut updated = grains;
+                    let updates: Vec<GrainUpdate> = (0..BLOCK_GRAINS)
+                        .map(|l| {
+                            advance_grain(
+                                &params,
+                                params.dt,
+                                1,
+                                &mut updated[l],
+                                &mut GrainLevel::new(level),
+                                &loads[l],
+                                &constants,
+                                if level == ModelLevel::Full {
+                                    directions[l]
+                                } else {
+                                    DVec2::ZERO
+                                },
+                                l,
+                                7,
+                            )
+                        })
+                        .collect();
+                    (updated, updates)
+                };
+                // A block's lanes against the one-grain updates; returns the failed grains.
+                let compare = |what: &str,
+                               block: &[Grain; BLOCK_GRAINS],
+                               stresses: &[GrainStress; BLOCK_GRAINS],
+                               outcome: &BlockOutcome,
+                               updated: &[Grain; BLOCK_GRAINS],
+                               updates: &[GrainUpdate]| {
+                    let mut failed = 0;
+                    for l in 0..BLOCK_GRAINS {
+                        let at = format!("{what}: case {case}, trial {trial}, lane {l}");
+                        assert_eq!(grain_bits(&block[l]), grain_bits(&updated[l]), "{at}");
+                        assert_eq!(
+                            stress_bits(&stresses[l]),
+                            stress_bits(&updates[l].stress),
+                            "{at}"
+                        );
+                        assert_eq!(bits(outcome.area.0[l]), bits(updates[l].area), "{at}");
+                        assert_eq!(
+                            bits(outcome.elastic_energy.0[l]),
+                            bits(updates[l].elastic_energy),
+                            "{at}"
+                        );
+                        let suspect = outcome.suspect & (1 << l) != 0;
+                        if updates[l].result.is_err() {
+                            assert!(suspect, "{at}: a failed grain not flagged");
+                            failed += 1;
+                        }
+                        if (10..=12).contains(&trial) {
+                            assert_eq!(suspect, updates[l].result.is_err(), "{at}");
+                        }
+                    }
+                    failed
+                };
                 let mut block_loads = BlockLoads::default();
                 for (l, load) in loads.iter().enumerate() {
                     block_loads.set_lane(l, load);
                 }
                 let contacts = loads.map(|load| [load.contacts, load.wall_contacts]);
+
+                let (updated, updates) = one_by_one(ModelLevel::Full);
+                let mut block = grains;
                 let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
                 let mut frames = [Frame::default(); BLOCK_GRAINS];
                 let outcome = advance_full_block(
@@ -1428,52 +1471,16 @@ mod tests {
                     &directions,
                     &block_constants,
                 );
+                flagged += compare("full", &block, &stresses, &outcome, &updated, &updates);
                 for l in 0..BLOCK_GRAINS {
-                    let at = format!("case {case}, trial {trial}, lane {l}");
-                    assert_eq!(grain_bits(&block[l]), grain_bits(&one_by_one[l]), "{at}");
-                    assert_eq!(
-                        stress_bits(&stresses[l]),
-                        stress_bits(&updates[l].stress),
-                        "{at}"
-                    );
-                    assert_eq!(bits(outcome.area.0[l]), bits(updates[l].area), "{at}");
-                    assert_eq!(
-                        bits(outcome.elastic_energy.0[l]),
-                        bits(updates[l].elastic_energy),
-                        "{at}"
-                    );
-                    let frame = Frame::of_grain(&one_by_one[l], density);
-                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");
-                    let suspect = outcome.suspect & (1 << l) != 0;
-                    if updates[l].result.is_err() {
-                        assert!(suspect, "{at}: a failed grain not flagged");
-                        flagged += 1;
-                    }
-                    if (10..=12).contains(&trial) {
-                        assert_eq!(suspect, updates[l].result.is_err(), "{at}");
-                    }
+                    let frame = Frame::of_grain(&updated[l], density);
+                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "lane {l}");
                 }
 
                 // The same grains at the rigid level: the rigid block against the one-grain
                 // update at that level (which reads no principal direction); frames are the
                 // caller's.
-                let mut one_by_one = grains;
-                let updates: Vec<GrainUpdate> = (0..BLOCK_GRAINS)
-                    .map(|l| {
-                        advance_grain(
-                            &params,
-                            params.dt,
-                            1,
-                            &mut one_by_one[l],
-                            &mut GrainLevel::new(ModelLevel::Rigid),
-                            &loads[l],
-                            &constants,
-                            DVec2::ZERO,
-                            l,
-                            7,
-                        )
-                    })
-                    .collect();
+                let (updated, updates) = one_by_one(ModelLevel::Rigid);
                 let mut block = grains;
                 let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
                 let outcome = advance_rigid_block(
@@ -1483,29 +1490,7 @@ mod tests {
                     &contacts,
                     &block_constants,
                 );
-                for l in 0..BLOCK_GRAINS {
-                    let at = format!("rigid: case {case}, trial {trial}, lane {l}");
-                    assert_eq!(grain_bits(&block[l]), grain_bits(&one_by_one[l]), "{at}");
-                    assert_eq!(
-                        stress_bits(&stresses[l]),
-                        stress_bits(&updates[l].stress),
-                        "{at}"
-                    );
-                    assert_eq!(bits(outcome.area.0[l]), bits(updates[l].area), "{at}");
-                    assert_eq!(
-                        bits(outcome.elastic_energy.0[l]),
-                        bits(updates[l].elastic_energy),
-                        "{at}"
-                    );
-                    let suspect = outcome.suspect & (1 << l) != 0;
-                    if updates[l].result.is_err() {
-                        assert!(suspect, "{at}: a failed grain not flagged");
-                        flagged += 1;
-                    }
-                    if (10..=12).contains(&trial) {
-                        assert_eq!(suspect, updates[l].result.is_err(), "{at}");
-                    }
-                }
+                flagged += compare("rigid", &block, &stresses, &outcome, &updated, &updates);
             }
         }
         assert_eq!(

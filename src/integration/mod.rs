@@ -1688,34 +1688,27 @@ mod tests {
             if case.starts_with("rigid") {
                 crate::run::bench::with_model(&mut world, ModelLevel::Rigid);
             }
+            let frictional = |world: &mut World| {
+                let settings = FrictionSettings {
+                    grains: 0.4,
+                    damping: 0.3,
+                    ..Default::default()
+                };
+                world.params.friction = Friction::new(&settings, &[0.3; 4]);
+            };
+            let sheared = |world: World| {
+                world.with_periodic(PeriodicBoundary {
+                    shear_rate: 1e-3,
+                    ..Default::default()
+                })
+            };
             match case {
-                "affine box" => world.affine_carry = true,
-                "friction" => {
-                    let settings = FrictionSettings {
-                        grains: 0.4,
-                        damping: 0.3,
-                        ..Default::default()
-                    };
-                    world.params.friction = Friction::new(&settings, &[0.3; 4]);
-                }
-                "periodic cell" => {
-                    world = world.with_periodic(PeriodicBoundary {
-                        shear_rate: 1e-3,
-                        ..Default::default()
-                    })
-                }
-                "rigid discs" => world.affine_carry = true,
+                "affine box" | "rigid discs" => world.affine_carry = true,
+                "friction" => frictional(&mut world),
+                "periodic cell" => world = sheared(world),
                 "rigid discs with friction in a periodic cell" => {
-                    let settings = FrictionSettings {
-                        grains: 0.4,
-                        damping: 0.3,
-                        ..Default::default()
-                    };
-                    world.params.friction = Friction::new(&settings, &[0.3; 4]);
-                    world = world.with_periodic(PeriodicBoundary {
-                        shear_rate: 1e-3,
-                        ..Default::default()
-                    })
+                    frictional(&mut world);
+                    world = sheared(world);
                 }
                 _ => {
                     // Every grain starts at the full level, and many step down within a few
