@@ -6,11 +6,12 @@
 #   usage: tools/paired_bench.sh OLD_SDEM NEW_SDEM ROUNDS BENCH_ARGS...
 #   e.g.   tools/paired_bench.sh /tmp/sdem_old target/release/sdem 8 \
 #            bench --grains 100000 --steps 300 --warmup 20 --threads 1 --model rigid
-# BENCH_ARGS are `sdem bench`'s (one thread each: the two runs share the machine's two cores).
+# BENCH_ARGS are `sdem bench`'s (one thread each: the two runs share the machine's two cores;
+# with `--threads 2` both threads of a build share its one core: use tools/alternated_bench.sh).
 # Needs taskset (util-linux) and at least two cores.
 set -eu
 if [ $# -lt 4 ]; then
-  sed -n '2,10p' "$0"
+  sed -n '2,11p' "$0"
   exit 2
 fi
 old=$1 new=$2 rounds=$3
