@@ -843,6 +843,15 @@ impl Scenario {
         self.sample.validate()?;
         let mut warnings = self.validate_settings()?;
         self.validate_time_step(&mut warnings)?;
+        // SDEM's step reads grains by number (the meshfree solver's nodes are its own).
+        if !matches!(self.model, Model::Meshfree(_))
+            && let Some(loaded) = &self.sample.loaded
+        {
+            warnings.extend(crate::sample::order::numbering_warning(
+                "sample.file",
+                &loaded.grains,
+            ));
+        }
         Ok(warnings)
     }
 
