@@ -3,15 +3,23 @@
 # shared machine whose speed drifts by 20-30% within the hour, the ratio of two runs side by side
 # moves far less than either run does (issue #16). Prints each round's grain-steps per second of
 # both builds and their ratio (NEW / OLD), then the median ratio.
-#   usage: tools/paired_bench.sh OLD_SDEM NEW_SDEM ROUNDS BENCH_ARGS...
+#   usage: tools/paired_bench.sh [--alternate] OLD_SDEM NEW_SDEM ROUNDS BENCH_ARGS...
 #   e.g.   tools/paired_bench.sh /tmp/sdem_old target/release/sdem 8 \
 #            bench --grains 100000 --steps 300 --warmup 20 --threads 1 --model rigid
-# BENCH_ARGS are `sdem bench`'s (one thread each: the two runs share the machine's two cores;
-# with `--threads 2` both threads of a build share its one core: use tools/alternated_bench.sh).
+# BENCH_ARGS are `sdem bench`'s (one thread each: the two runs share the machine's two cores).
+# --alternate: the two builds one after the other instead, each on every core, the order
+# swapped every round: for two-thread (or more) ratios, which side by side would put both
+# threads of a build on one core. Take five rounds or more: drifts faster than a round's two
+# runs do not cancel.
 # Needs taskset (util-linux) and at least two cores.
 set -eu
+alternate=0
+if [ "${1:-}" = "--alternate" ]; then
+  alternate=1
+  shift
+fi
 if [ $# -lt 4 ]; then
-  sed -n '2,11p' "$0"
+  sed -n '2,14p' "$0"
   exit 2
 fi
 old=$1 new=$2 rounds=$3
@@ -22,9 +30,17 @@ rate() { awk '/^grain-steps\/s:/ {print $2}' "$1"; }
 ratios=()
 for round in $(seq 1 "$rounds"); do
   if [ $((round % 2)) = 1 ]; then old_core=0 new_core=1; else old_core=1 new_core=0; fi
-  taskset -c $old_core "$old" "$@" >"$work/old.txt" &
-  taskset -c $new_core "$new" "$@" >"$work/new.txt" &
-  wait
+  if [ "$alternate" = 1 ]; then
+    if [ "$old_core" = 0 ]; then
+      "$old" "$@" >"$work/old.txt"; "$new" "$@" >"$work/new.txt"
+    else
+      "$new" "$@" >"$work/new.txt"; "$old" "$@" >"$work/old.txt"
+    fi
+  else
+    taskset -c $old_core "$old" "$@" >"$work/old.txt" &
+    taskset -c $new_core "$new" "$@" >"$work/new.txt" &
+    wait
+  fi
   a=$(rate "$work/old.txt") b=$(rate "$work/new.txt")
   ratio=$(python3 -c "print(f'{$b / $a:.4f}')")
   ratios+=("$ratio")
