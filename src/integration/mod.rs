@@ -1659,7 +1659,8 @@ mod tests {
         // grain_pass compares them), and the pass around them keeps every order: a world
         // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
-        // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down;
+        // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down
+        // (the levels and their counters too);
         // rigid discs alike (their blocks' frames written after them); and a step that fails
         // reports the same first failure.
         use crate::contact::friction::FrictionSettings;
@@ -1765,6 +1766,7 @@ mod tests {
                 same("frames", &at, &frames(&by_block), &frames(&by_grain));
                 same("centres", &at, &by_block.centers, &by_grain.centers);
                 same("reaches", &at, &by_block.reach, &by_grain.reach);
+                same("levels", &at, by_block.levels(), by_grain.levels());
             }
             if case == "adaptive levels" {
                 let counts = by_block.totals.level_counts;
