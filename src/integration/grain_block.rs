@@ -1,12 +1,13 @@
 //! The update of four consecutive full-level grains side by side in AVX lanes (issue #16): the
-//! grain pass's common case on a plain step of a deforming sample.
+//! grain pass's common case on a plain step of a deforming sample; and that of four rigid
+//! grains, the same arithmetic without the deformation (`advance_lanes::<RIGID>`).
 //!
 //! Each lane computes what the one-grain update (`advance_grain` in
 //! [`grain_pass`](super::grain_pass)) computes for its grain, with the same operations in the
 //! same order (products and sums as glam computes them), then the grain's next frame
 //! (`Frame::of_grain`): the same bits, grain by grain. The constitutive laws and the frames'
 //! affine maps are the one-grain code's own functions, written over [`Real`]; the stresses and
-//! the symplectic Euler step are written here a second time, for the full level only, because
+//! the symplectic Euler step are written here a second time, for these two levels only, because
 //! the one-grain update written over `Real` cost rigid grains 30–40 instructions a grain-step
 //! (the twenty-ninth session's measurement). The unit test
 //! `a_block_gives_each_grain_the_one_grain_updates_bits` holds the two together. The lanes run

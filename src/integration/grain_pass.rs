@@ -1306,9 +1306,9 @@ mod tests {
         // Expectation: a block's lanes are four one-grain updates side by side (`advance_grain`
         // at the full level, then `Frame::of_grain` of the updated grain; or at the rigid
         // level): every field of the grains, their stress records, areas, elastic energies
-        // and (full level) next frames bit for bit,
-        // compressible and incompressible, with and without gravity, strain differences on
-        // both sides of k_alpha's threshold (zero included). A grain the one-grain checks fail
+        // and (full level) next frames bit for bit, compressible and incompressible, with and
+        // without gravity, strain differences on both sides of k_alpha's threshold (zero
+        // included). A grain the one-grain checks fail
         // is flagged for them.
         use super::super::grain_block::{
             BLOCK_GRAINS, BlockLoads, BlockOutcome, advance_full_block, advance_rigid_block,
@@ -1474,7 +1474,8 @@ mod tests {
                 flagged += compare("full", &block, &stresses, &outcome, &updated, &updates);
                 for l in 0..BLOCK_GRAINS {
                     let frame = Frame::of_grain(&updated[l], density);
-                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "lane {l}");
+                    let at = format!("frame: case {case}, trial {trial}, lane {l}");
+                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");
                 }
 
                 // The same grains at the rigid level: the rigid block against the one-grain

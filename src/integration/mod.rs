@@ -1660,9 +1660,8 @@ mod tests {
         // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
         // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down
-        // (the levels and their counters too);
-        // rigid discs alike (their blocks' frames written after them); and a step that fails
-        // reports the same first failure.
+        // (the levels and their counters too); rigid discs alike (their blocks' frames written
+        // after them); and a step that fails reports the same first failure.
         use crate::contact::friction::FrictionSettings;
         use crate::integration::parameters::Friction;
         if !grain_block::blocks_available() {

@@ -45,15 +45,16 @@ pub const LANES: usize = 8;
 /// The lanes of [`LANES`] pairs.
 pub type PairLanes = Lanes<LANES>;
 
-/// How many pairs ahead the pair pass asks for the second grain's frame: among polygons, both
+/// How many pairs ahead the pair pass asks for the second grain's frame among polygons: both
 /// its cache lines, for the next four pairs at each turn (issue #16: 1.028 times as fast at 10⁵
 /// grains on one thread as the first line alone, for one pair a turn, which left three pairs
 /// in four out where blocks of four were recorded at once; 16 ahead was 0.989 times as fast
-/// as 8),
+/// as 8, and 32 ahead 0.96).
 const PREFETCH_AHEAD: usize = 8;
-/// and among circles, whose pairs take a few nanoseconds each, the line a circle reads (at 10⁵
-/// rigid discs, 32 pairs ahead stepped 1.10 times as fast as 8 on one thread, 16 and 64 ahead
-/// 0.98 times as fast as 32; the polygons' pass was 0.96 times as fast with 32).
+/// How many pairs ahead the pair pass asks for the second grain's frame among circles, whose
+/// pairs take a few nanoseconds each: the line a circle reads (at 10⁵ rigid discs, 32 pairs
+/// ahead stepped 1.10 times as fast as 8 on one thread, 16 and 64 ahead 0.98 times as fast as
+/// 32).
 const CIRCLE_PREFETCH_AHEAD: usize = 32;
 
 /// What the pair pass reads, shared by every chunk.
