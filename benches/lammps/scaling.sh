@@ -9,7 +9,8 @@
 # rounds stop after LAMMPS_ROUNDS (default ROUNDS). `lmp` and `mpirun` come from PATH, or from
 # LMP and MPIRUN (a carried build: bundle.sh); NO_LAMMPS=1 times sdem alone. mpirun runs with
 # --bind-to none, as sdem's threads are not pinned either. Lines go to stdout and, with the
-# summary, to work/scaling_N.txt.
+# summary, to work/scaling_N.txt; each sdem line keeps the run's seconds by pass, and the summary
+# gives each pass's own speed-up, to show which pass holds the scaling back.
 set -eu
 here=$(cd "$(dirname "$0")" && pwd)
 n=$1; counts=$2; lsteps=$3; ssteps=$4; rounds=${5:-3}
@@ -30,7 +31,7 @@ for r in $(seq 1 "$rounds"); do
     for model in rigid full; do
       steps=$ssteps; [ "$model" = rigid ] && steps=$((3 * ssteps))
       res=$("$sdem" bench --grains "$n" --steps "$steps" --warmup 20 --threads "$t" --model "$model")
-      say "sdem model=$model threads=$t N=$n round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*')"
+      say "sdem model=$model threads=$t N=$n round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
     done
   done
   if [ "$lammps" = 1 ] && [ "$r" -le "$lrounds" ]; then
@@ -61,6 +62,22 @@ for code in ("sdem rigid", "sdem full", "LAMMPS"):
         lam = rates.get(("LAMMPS", p))
         ratio = med / statistics.median(lam) if lam else float("nan")
         lines.append(f"{code:10s} {p:3d}: {med:.3e} | {up:6.2f} | {up / p:5.2f} | {ratio:5.2f}   (runs: {', '.join(f'{x:.3e}' for x in v)})")
+# Each pass's median seconds and its own speed-up over one thread: which pass scales worse.
+passes = {}
+for line in open(path):
+    m = re.match(r"sdem model=(\w+) threads=(\d+) .*\| frames (.*)", line)
+    if m:
+        for name, sec in re.findall(r"([a-z ]+?) ([0-9.]+) s \(", "frames " + m.group(3)):
+            passes.setdefault((m.group(1), name.strip(), int(m.group(2))), []).append(float(sec))
+if passes:
+    lines += ["", "pass medians (s) | speed-up of the pass over 1 thread"]
+    for (model, name, t), v in sorted(passes.items()):
+        base = passes.get((model, name, 1))
+        med = statistics.median(v)
+        if med == 0:
+            continue
+        up = statistics.median(base) / med if base and med > 0 else float("nan")
+        lines.append(f"sdem {model:5s} {name:14s} {t:3d}: {med:.3f} | {up:6.2f}")
 print("\n".join(lines))
 open(path, "a").write("\n".join(lines) + "\n")
 PY
