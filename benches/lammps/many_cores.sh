@@ -1,6 +1,11 @@
 #!/usr/bin/env bash
-# Issue #16's figures on a many-core machine, in one call of about 7 minutes on 16 cores:
-#  1. scaling.sh at 10^5 grains (sdem rigid and full, LAMMPS), 1, 2, 4, ... up to every processor;
+# Issue #16's figures on a many-core machine, in one call of about 4 minutes on 16 cores (220 s
+# on the lent machine of the thirty-fourth session, before the probe of 0.):
+#  0. the topology lscpu reports, and whether two processors share a core or a cache: `sdem
+#     bench` (rigid, 10^5) on processor 0, then two threads pinned to 0 and 1, and to 0 and
+#     half the count;
+#  1. scaling.sh at 10^5 grains (sdem rigid and full, LAMMPS), 1, 2, 4, ... up to every
+#     processor, with each sdem run's seconds by pass;
 #  2. scenarios/isotropic_100k.ron on every processor: wall time, peak memory, and whether its
 #     macro.csv is the shipped one byte for byte (it was run on 2 threads of another machine);
 #  3. `sdem bench` at 10^6 grains on 1 and on every processor: speed and peak memory a grain.
@@ -32,6 +37,17 @@ print(f"rc={rc} wall={wall:.1f} s peak={resource.getrusage(resource.RUSAGE_CHILD
 p=$(nproc); counts=""; c=1
 while [ $c -lt "$p" ]; do counts="$counts $c"; c=$((2 * c)); done; counts="$counts $p"
 say "$(date -u +%FT%TZ) $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $p processors ($(lscpu | awk -F: '/per core/ {gsub(/ /, "", $2); print $2}') a core), $(free -g | awk '/Mem/ {print $2}') GB"
+# The topology as the machine reports it: a VM may hide that two of its processors share a core.
+lscpu | grep -E '^(Thread|Core|Socket|NUMA node|L[123]|Model name)' | sed 's/  */ /g' | tee -a "$results"
+# Two threads on processors 0 and 1 against 0 and p/2, alternated with one thread on 0: where
+# the two pinnings differ, two of the machine's processors share a core or a cache.
+for r in 1 2 3; do
+  for cpus in 0 0,1 "0,$((p / 2))"; do
+    t=$(echo "$cpus" | tr ',' '\n' | wc -l)
+    res=$(taskset -c "$cpus" "$sdem" bench --grains 100000 --steps 300 --warmup 20 --threads "$t" --model rigid 2>&1)
+    say "pinned to $cpus: sdem rigid threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
+  done
+done
 LAMMPS_ROUNDS=2 timeout 300 benches/lammps/scaling.sh 100000 "$counts" 1000 120 3 "$sdem" | tee -a "$results"
 out=$(mktemp -d)
 r=$(peak timeout "${SCENARIO_SECONDS:-300}" "$sdem" run scenarios/isotropic_100k.ron --out "$out" --quiet 2>&1 | tail -1)
