@@ -1444,3 +1444,55 @@ fn stress_targets_out_of_reach_are_warned_about() {
         "{stderr}"
     );
 }
+
+/// `sdem sort-sample` on a file it cannot sort: a missing file names itself; a malformed line
+/// names `file:line` and the fault, and nothing is written; the output's folder must exist.
+#[test]
+fn sort_sample_on_bad_input() {
+    let scratch = Scratch::new("sort_sample");
+    let missing = scratch.path("missing.csv");
+    let out = scratch.path("out.csv");
+    let stderr = clean_failure(
+        "missing file",
+        &sdem(&[
+            std::ffi::OsStr::new("sort-sample"),
+            missing.as_os_str(),
+            out.as_os_str(),
+        ]),
+    );
+    assert_mentions(
+        "missing file",
+        &stderr,
+        &["cannot read the sample file", "missing.csv"],
+    );
+    let bad = scratch.write("bad.csv", "x,y,radius\n0.1,0.1,0.01\n0.2,0.1\n");
+    let stderr = clean_failure(
+        "short line",
+        &sdem(&[
+            std::ffi::OsStr::new("sort-sample"),
+            bad.as_os_str(),
+            out.as_os_str(),
+        ]),
+    );
+    assert_mentions(
+        "short line",
+        &stderr,
+        &["bad.csv:3:", "2 fields, expected 3"],
+    );
+    assert!(!out.exists(), "a failed sort wrote {}", out.display());
+    let good = scratch.write("good.csv", "x,y,radius\n0.1,0.1,0.01\n");
+    let nowhere = scratch.path("no/such/folder/out.csv");
+    let stderr = clean_failure(
+        "output folder missing",
+        &sdem(&[
+            std::ffi::OsStr::new("sort-sample"),
+            good.as_os_str(),
+            nowhere.as_os_str(),
+        ]),
+    );
+    assert_mentions(
+        "output folder missing",
+        &stderr,
+        &["cannot write", "out.csv"],
+    );
+}

@@ -937,8 +937,9 @@ fn unframe<'b>(bytes: &'b [u8], path: &str) -> Result<(u32, &'b [u8]), Checkpoin
 }
 
 /// Writes to `path` atomically what `write` writes to the file: `<path>.tmp`, fsync, rename
-/// over `path`, fsync of the directory.
-fn write_atomic(
+/// over `path`, fsync of the directory (a failed write leaves what `path` held; `sdem
+/// sort-sample` writes its file this way too, which may be the file it read).
+pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
