@@ -6,7 +6,10 @@
 # WARMUP=K (default 20) gives sdem bench K untimed steps first (see `sdem bench --help`).
 # SAME_PACKING=1 also times sdem's rigid discs on LAMMPS's own packing, in its periodic box
 # (to_sdem.py; "model=rigid-lammps-packing"): the same discs and contacts, where the lattice of
-# `sdem bench` has 6 contacts a grain and LAMMPS's packing about 4.15.
+# `sdem bench` has 6 contacts a grain and LAMMPS's packing about 4.15; in the file's order, as
+# LAMMPS's two processes wrote it (the left half of the box, then the right), and sorted into
+# strips by `sdem sort-sample` ("model=rigid-lammps-packing-strips"), as LAMMPS sorts its own
+# atoms in space: on two threads the file's order costs sdem's sweep its fused passes.
 # Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
 # packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/,
 # unless work/dense_N.data is there already: for 10^6, tile the 10^5 packing instead of
@@ -35,8 +38,10 @@ for r in $(seq 1 "$rounds"); do
   done
   if [ "${SAME_PACKING:-0}" = 1 ]; then
     for t in 1 2; do
-      out=$("$sdem" bench --from sdem_$n/checkpoint.bin --steps "$ssteps" --warmup "$warmup" --threads "$t")
-      echo "sdem model=rigid-lammps-packing threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+      for order in "" _strips; do
+        out=$("$sdem" bench --from sdem_$n$order/checkpoint.bin --steps "$ssteps" --warmup "$warmup" --threads "$t")
+        echo "sdem model=rigid-lammps-packing${order/_/-} threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+      done
     done
   fi
 done

@@ -8,7 +8,9 @@
 #     processor, with each sdem run's seconds by pass;
 #  2. scenarios/isotropic_100k.ron on every processor: wall time, peak memory, and whether its
 #     macro.csv is the shipped one byte for byte (it was run on 2 threads of another machine);
-#  3. `sdem bench` at 10^6 grains on 1 and on every processor: speed and peak memory a grain.
+#  3. `sdem bench` at 10^6 grains on 1 and on every processor: speed and peak memory a grain;
+#  4. LAMMPS's packing in its file's order and sorted into strips (`sdem sort-sample`), 1, 2,
+#     4, ... threads: what a sample's order costs the threaded sweep (about 40 s more).
 #   usage: benches/lammps/many_cores.sh [BUNDLE]      (from the repository's root)
 # BUNDLE: a folder made by bundle.sh (sdem, LAMMPS and Open MPI for a machine without them);
 # without it, target/release/sdem and the `lmp` and `mpirun` on PATH. Lines go to stdout and
@@ -63,3 +65,24 @@ for model in rigid full; do
     say "sdem bench N=10^6 model=$model threads=$t: $(echo "$r" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$r" | grep -o 'frames .*') | $(echo "$r" | tail -1)"
   done
 done
+# 4. The order of a sample file: LAMMPS's packing (work/dense_100000.data) as rigid sdem discs
+#    in its file's order (two halves: its two MPI processes' atoms) and sorted into strips by
+#    `sdem sort-sample`, `bench --from` each after the same 10 relaxing steps, on 1, 2, 4, ...
+#    threads: how much the sweep's fallback to two passes costs where many threads share a step.
+if [ -f $work/dense_100000.data ]; then
+  (
+    cd $work && rm -rf order_probe && mkdir order_probe && cd order_probe
+    python3 ../../to_sdem.py ../dense_100000.data file 10 >/dev/null
+    "$sdem" sort-sample file_grains.csv strips_grains.csv >/dev/null
+    sed 's/file_grains.csv/strips_grains.csv/; s/name: "file"/name: "strips"/' file.ron >strips.ron
+    for order in file strips; do "$sdem" run $order.ron --out $order --quiet >/dev/null 2>&1; done
+  )
+  for r in 1 2; do
+    for t in $counts; do
+      for order in file strips; do
+        res=$("$sdem" bench --from $work/order_probe/$order/checkpoint.bin --steps 300 --warmup 20 --threads "$t" 2>&1)
+        say "LAMMPS's packing in order=$order threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
+      done
+    done
+  done
+fi

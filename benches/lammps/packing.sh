@@ -2,7 +2,8 @@
 # work/dense_N.data, LAMMPS's dense packing of N discs (compressed from a gas: about 6 min for
 # 10^5 on 2 cores), unless it is there, with $MPIRUN and $LMP where set (bundle.sh's carried
 # build); `sdem_packing N SDEM` makes work/sdem_N/checkpoint.bin, the same discs as an sdem
-# world (to_sdem.py and a 10-step run), unless it is there. Both run in work/. `lammps_rate LOG N`
+# world (to_sdem.py and a 10-step run), and work/sdem_N_strips/checkpoint.bin, the same with the
+# file's rows sorted into strips (`sdem sort-sample`), unless they are there. Both run in work/. `lammps_rate LOG N`
 # prints the atom-steps per second of a LAMMPS log of N atoms (steps x N / its loop time).
 lammps_packing() {
   local n=$1
@@ -17,6 +18,12 @@ sdem_packing() {
   if [ ! -f sdem_$n/checkpoint.bin ]; then
     python3 ../to_sdem.py dense_$n.data sdem_$n 10 >/dev/null
     "$sdem" run sdem_$n.ron --out sdem_$n --quiet >/dev/null
+  fi
+  if [ ! -f sdem_${n}_strips/checkpoint.bin ]; then
+    "$sdem" sort-sample sdem_${n}_grains.csv sdem_${n}_strips_grains.csv >/dev/null
+    sed "s/sdem_${n}_grains.csv/sdem_${n}_strips_grains.csv/; s/name: \"sdem_$n\"/name: \"sdem_${n}_strips\"/" \
+      sdem_$n.ron >sdem_${n}_strips.ron
+    "$sdem" run sdem_${n}_strips.ron --out sdem_${n}_strips --quiet >/dev/null
   fi
 }
 lammps_rate() {
