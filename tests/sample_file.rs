@@ -279,7 +279,10 @@ fn a_version_1_checkpoint_still_reads() {
 /// `Scenario::load`'s warning that names `sample.file` and asks for its rows sorted with `sdem
 /// sort-sample`; the same grains row by row draw none, and so does the scattered file once
 /// `sdem sort-sample` has sorted it, whose lines are the scattered file's, each once (issue #16:
-/// a scattered order of LAMMPS's 10^5 packing stepped half as fast).
+/// a scattered order of LAMMPS's 10^5 packing stepped half as fast). The grains of the left
+/// half row by row, then those of the right half (as two MPI processes write a packing) draw
+/// the other warning: every chunk of the right half has a grain that touches the left half, so
+/// the step's sweep would wait on two threads.
 #[test]
 fn a_sample_file_in_a_scattered_order_draws_a_warning() {
     let dir = temp_dir("scattered");
@@ -298,6 +301,15 @@ fn a_sample_file_in_a_scattered_order_draws_a_warning() {
         ("rows", Some((0..n).collect::<Vec<_>>())),
         ("scattered", Some((0..n).map(|k| k * 7919 % n).collect())),
         ("sorted", None),
+        (
+            "halves",
+            Some(
+                (0..n)
+                    .filter(|k| k % side < side / 2)
+                    .chain((0..n).filter(|k| k % side >= side / 2))
+                    .collect(),
+            ),
+        ),
     ] {
         match order {
             Some(order) => {
@@ -344,12 +356,21 @@ fn a_sample_file_in_a_scattered_order_draws_a_warning() {
             .iter()
             .filter(|w| w.starts_with("sample.file: grains numbered one after the other"))
             .collect();
+        let waiting: Vec<&String> = warnings
+            .iter()
+            .filter(|w| w.starts_with("sample.file: grains meet grains far back"))
+            .collect();
+        let sort_hint = "sdem sort-sample FILE SORTED.csv";
         match name {
             "scattered" => assert!(
-                ordering.len() == 1 && ordering[0].contains("sdem sort-sample FILE SORTED.csv"),
+                ordering.len() == 1 && ordering[0].contains(sort_hint) && waiting.is_empty(),
                 "{warnings:?}"
             ),
-            _ => assert!(ordering.is_empty(), "{warnings:?}"),
+            "halves" => assert!(
+                ordering.is_empty() && waiting.len() == 1 && waiting[0].contains(sort_hint),
+                "{warnings:?}"
+            ),
+            _ => assert!(ordering.is_empty() && waiting.is_empty(), "{warnings:?}"),
         }
     }
 }

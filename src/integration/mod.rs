@@ -31,6 +31,7 @@ mod sweep;
 
 pub use instability::Instability;
 pub use parameters::Parameters;
+pub use sweep::{SweepPlan, sweep_plan_of};
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};

@@ -316,6 +316,30 @@ pub(super) fn sweep<'a>(
     }
 }
 
+/// How the sweep would take grains numbered as `neighbors`' list numbers them on `threads`
+/// threads: the grain chunks, those of them that would wait for the second round, and whether
+/// the sweep would still fuse the two passes (see [`Plan`]). For a check of a sample's
+/// numbering before a run (`sample::order::threads_wait_warning`).
+pub fn sweep_plan_of(neighbors: &NeighborList, grains: usize, threads: usize) -> SweepPlan {
+    let earliest = earliest_first_grains(neighbors, grains);
+    let plan = Plan::new(&earliest, threads);
+    SweepPlan {
+        chunks: earliest.len(),
+        waiting: (0..earliest.len())
+            .filter(|&c| waits(&earliest, c, plan.run))
+            .count(),
+        fused: plan.fused,
+    }
+}
+
+/// What [`sweep_plan_of`] returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SweepPlan {
+    pub chunks: usize,
+    pub waiting: usize,
+    pub fused: bool,
+}
+
 /// How the sweep's tasks share the chunks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Plan {

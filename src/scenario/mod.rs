@@ -847,10 +847,15 @@ impl Scenario {
         if !matches!(self.model, Model::Meshfree(_))
             && let Some(loaded) = &self.sample.loaded
         {
-            warnings.extend(crate::sample::order::numbering_warning(
-                "sample.file",
-                &loaded.grains,
-            ));
+            let scattered = crate::sample::order::numbering_warning("sample.file", &loaded.grains);
+            if scattered.is_none() {
+                warnings.extend(crate::sample::order::threads_wait_warning(
+                    "sample.file",
+                    &loaded.grains,
+                    self.contact.skin * self.mean_radius(),
+                ));
+            }
+            warnings.extend(scattered);
         }
         Ok(warnings)
     }
