@@ -565,6 +565,7 @@ fn run(cli: Cli) -> Result<()> {
             );
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
             println!("time by pass: {}", result.phases);
+            println!("sweep: {}", result.sweeps);
         }
         Command::Calibrate {
             assembly,
@@ -837,6 +838,10 @@ fn report(summary: &sdem::run::RunSummary, options: &RunOptions, out_dir: &Path)
     );
     if let Some(phases) = &summary.phase_seconds {
         eprintln!("time by pass: {phases}");
+    }
+    if let Some(sweeps) = summary.sweeps.filter(|t| t.two_passes > 0) {
+        // Only where it cost something: a sample whose numbering makes the threads wait.
+        eprintln!("sweep: {sweeps}");
     }
     if let Some(j) = summary.jamming {
         eprintln!(

@@ -31,7 +31,7 @@ mod sweep;
 
 pub use instability::Instability;
 pub use parameters::Parameters;
-pub use sweep::{SweepPlan, sweep_plan_of};
+pub use sweep::{SweepPlan, SweepTally, sweep_plan_of};
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
@@ -640,6 +640,8 @@ pub struct World {
     wall_history: Vec<[f64; MAX_WALLS]>,
     /// Where the steps' wall-clock time went (a diagnostic).
     pub phase_times: PhaseTimes,
+    /// The step sweeps so far, and how their tasks shared the chunks.
+    pub sweep_tally: SweepTally,
     /// An affine phase (see [`BoxCarry`]): each step moves every grain centre with the box,
     /// inside the grain pass. Set by the run loop before each step; not in a periodic cell,
     /// whose grains follow the cell anyway.
@@ -733,6 +735,7 @@ impl World {
             friction_work: 0.0,
             wall_history: vec![[0.0; MAX_WALLS]; n],
             phase_times: PhaseTimes::default(),
+            sweep_tally: SweepTally::default(),
             affine_carry: false,
             cycle_substep: None,
             fast: Vec::new(),
@@ -1113,6 +1116,7 @@ impl World {
         let seconds = start.elapsed().as_secs_f64();
         self.phase_times.pairs += swept.pair_share * seconds;
         self.phase_times.grains += (1.0 - swept.pair_share) * seconds;
+        self.sweep_tally.add(&swept.plan);
         let mut totals = PairSums::default();
         for sums in swept.pair_sums() {
             if let Some(f) = sums.failure {

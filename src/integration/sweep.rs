@@ -181,6 +181,8 @@ struct ChunkResults {
 pub(super) struct SweepResults {
     chunks: Vec<ChunkResults>,
     pub pair_share: f64,
+    /// How the tasks shared the chunks.
+    pub plan: SweepPlan,
 }
 
 impl SweepResults {
@@ -313,6 +315,11 @@ pub(super) fn sweep<'a>(
     SweepResults {
         chunks: results,
         pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
+        plan: SweepPlan {
+            chunks,
+            waiting: plan.waiting,
+            fused: plan.fused,
+        },
     }
 }
 
@@ -325,19 +332,63 @@ pub fn sweep_plan_of(neighbors: &NeighborList, grains: usize, threads: usize) ->
     let plan = Plan::new(&earliest, threads);
     SweepPlan {
         chunks: earliest.len(),
-        waiting: (0..earliest.len())
-            .filter(|&c| waits(&earliest, c, plan.run))
-            .count(),
+        waiting: plan.waiting,
         fused: plan.fused,
     }
 }
 
-/// What [`sweep_plan_of`] returns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How a sweep shares its grain chunks among its tasks (see [`Plan`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SweepPlan {
     pub chunks: usize,
+    /// The chunks whose grains wait for the second round (on one thread: none).
     pub waiting: usize,
+    /// Whether the pair and grain passes ran as one sweep; else one after the other.
     pub fused: bool,
+}
+
+/// The sweeps of a run so far ([`World::sweep_tally`](super::World)): how many, how many took
+/// the two passes one after the other, and their waiting chunks, summed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SweepTally {
+    pub sweeps: u64,
+    pub two_passes: u64,
+    pub waiting_chunks: u64,
+    /// The chunks of the last sweep.
+    pub chunks: usize,
+}
+
+impl SweepTally {
+    pub fn add(&mut self, plan: &SweepPlan) {
+        self.sweeps += 1;
+        self.two_passes += u64::from(!plan.fused);
+        self.waiting_chunks += plan.waiting as u64;
+        self.chunks = plan.chunks;
+    }
+
+    /// The sweeps since `before`, a tally of the same run taken earlier.
+    pub fn since(&self, before: &SweepTally) -> SweepTally {
+        SweepTally {
+            sweeps: self.sweeps - before.sweeps,
+            two_passes: self.two_passes - before.two_passes,
+            waiting_chunks: self.waiting_chunks - before.waiting_chunks,
+            chunks: self.chunks,
+        }
+    }
+}
+
+/// "300 sweeps, 0 in two passes; 6.0 of 391 chunks waited (mean)".
+impl std::fmt::Display for SweepTally {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} sweeps, {} in two passes; {:.1} of {} chunks waited (mean)",
+            self.sweeps,
+            self.two_passes,
+            self.waiting_chunks as f64 / self.sweeps.max(1) as f64,
+            self.chunks
+        )
+    }
 }
 
 /// How the sweep's tasks share the chunks.
@@ -345,6 +396,8 @@ pub struct SweepPlan {
 struct Plan {
     /// Chunks a task sweeps: one run a thread, so that one thread sweeps every chunk at once.
     run: usize,
+    /// The chunks whose grains wait for the second round (see [`waits`]).
+    waiting: usize,
     /// Whether a run's grains follow its pairs (but those of the chunks that wait); else every
     /// grain waits for the second round, and the sweep is the pair pass and then the grain
     /// pass.
@@ -364,6 +417,7 @@ impl Plan {
         // 0.86 times as fast as with the two passes).
         Self {
             run,
+            waiting,
             fused: waiting * MOST_WAITING <= chunks,
         }
     }
@@ -487,6 +541,48 @@ mod tests {
         world.walls[crate::boundary::walls::RIGHT].velocity.x = -2e-3 * w;
         world.walls[crate::boundary::walls::TOP].velocity.y = -1e-3 * h;
         world
+    }
+
+    #[test]
+    fn the_tally_counts_each_sweep_with_the_plan_the_sample_check_gives() {
+        // Expectation: one sweep a step; on one thread no chunk waits and the passes are one
+        // sweep; on three, the tally's last plan is what `sweep_plan_of` (the check of a
+        // sample file's numbering) gives for the step's list, waiting chunks included, and
+        // those are the chunks that `waits` names.
+        for threads in [1, 3] {
+            let (tally, plan, waiting) = in_pool(threads, || {
+                let mut world = packing(ModelLevel::Rigid, false);
+                for _ in 0..5 {
+                    world.step().unwrap();
+                }
+                let n = world.grains.len();
+                let plan = sweep_plan_of(&world.neighbors, n, threads);
+                let run = n.div_ceil(GRAIN_CHUNK).div_ceil(threads);
+                let waiting = (0..world.earliest_first_grains.len())
+                    .filter(|&c| waits(&world.earliest_first_grains, c, run))
+                    .count();
+                (world.sweep_tally, plan, waiting)
+            });
+            assert_eq!(
+                (tally.sweeps, tally.chunks),
+                (5, plan.chunks),
+                "{threads} threads"
+            );
+            assert_eq!(plan.waiting, waiting, "{threads} threads");
+            if threads == 1 {
+                assert_eq!((tally.two_passes, tally.waiting_chunks), (0, 0));
+            } else {
+                assert!(plan.waiting > 0, "{plan:?}");
+                assert!(
+                    tally.waiting_chunks >= plan.waiting as u64,
+                    "{tally:?} {plan:?}"
+                );
+                assert!(
+                    tally.two_passes >= u64::from(!plan.fused),
+                    "{tally:?} {plan:?}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -32,6 +32,8 @@ pub struct BenchResult {
     pub neighbor_builds: u64,
     /// Seconds of the timed steps spent in each pass of the step.
     pub phases: PhaseTimes,
+    /// The timed steps' sweeps: how their tasks shared the chunks.
+    pub sweeps: crate::integration::SweepTally,
 }
 
 impl BenchResult {
@@ -113,6 +115,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
     }
     let builds_before = world.neighbors.builds;
     let phases_before = world.phase_times;
+    let sweeps_before = world.sweep_tally;
     let start = Instant::now();
     for _ in 0..steps {
         world.step()?;
@@ -133,6 +136,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
             pairs: world.phase_times.pairs - phases_before.pairs,
             grains: world.phase_times.grains - phases_before.grains,
         },
+        sweeps: world.sweep_tally.since(&sweeps_before),
     })
 }
 

@@ -138,6 +138,9 @@ pub struct RunSummary {
     pub neighbor_builds: u64,
     /// SDEM only: the wall-clock seconds this process's steps spent in each pass of the step.
     pub phase_seconds: Option<PhaseTimes>,
+    /// SDEM only: how this process's step sweeps shared their grain chunks among threads (a
+    /// sample whose numbering makes many chunks wait takes the two passes one after the other).
+    pub sweeps: Option<crate::integration::SweepTally>,
     /// For nu = 0.5: RMS relative error of p_c(phi) against eq. 69 with the run's own phi_0 and
     /// Z_0 (= z_nr at jamming), over phi in [phi_0 + 0.01, final phi], and the number of rows.
     pub eq69_rms_error: Option<(f64, usize)>,
@@ -591,6 +594,16 @@ pub(crate) fn write_summary(
         ] {
             writeln!(f, "pass_seconds_{name} = {seconds:.3}")?;
         }
+    }
+    if let Some(t) = &s.sweeps {
+        writeln!(f, "sweeps = {}", t.sweeps)?;
+        writeln!(f, "sweeps_in_two_passes = {}", t.two_passes)?;
+        writeln!(
+            f,
+            "sweep_waiting_chunks_mean = {:.1} (of {})",
+            t.waiting_chunks as f64 / t.sweeps.max(1) as f64,
+            t.chunks
+        )?;
     }
     if s.mcap_seconds > 0.0 {
         writeln!(f, "mcap_write_seconds = {:.3}", s.mcap_seconds)?;

@@ -266,6 +266,7 @@ impl Simulation for Sdem {
         SolverStatistics {
             neighbor_builds: self.world.neighbors.builds,
             phase_seconds: Some(self.world.phase_times),
+            sweeps: Some(self.world.sweep_tally),
             adaptive: self.adaptive,
         }
     }

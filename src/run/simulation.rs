@@ -240,6 +240,8 @@ pub struct SolverStatistics {
     pub neighbor_builds: u64,
     /// SDEM only: where this process's steps spent their wall-clock time.
     pub phase_seconds: Option<PhaseTimes>,
+    /// SDEM only: how this process's step sweeps shared their grain chunks among threads.
+    pub sweeps: Option<crate::integration::SweepTally>,
     /// Adaptive model level only: how the steps were spent.
     pub adaptive: Option<AdaptiveStats>,
 }

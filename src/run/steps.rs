@@ -509,6 +509,7 @@ impl<'a> Run<'a> {
             max_loaded_inertial_number: state.max_loaded_inertial_number,
             neighbor_builds: statistics.neighbor_builds,
             phase_seconds: statistics.phase_seconds,
+            sweeps: statistics.sweeps,
             mcap_seconds: self.mcap_seconds,
             adaptive: statistics.adaptive,
             checkpoints_written: self.checkpoints_written,
