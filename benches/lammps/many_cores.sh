@@ -47,7 +47,7 @@ for r in 1 2 3; do
   for cpus in 0 0,1 "0,$((p / 2))"; do
     t=$(echo "$cpus" | tr ',' '\n' | wc -l)
     res=$(taskset -c "$cpus" "$sdem" bench --grains 100000 --steps 300 --warmup 20 --threads "$t" --model rigid 2>&1)
-    say "pinned to $cpus: sdem rigid threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
+    say "pinned to $cpus: sdem rigid threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*') | $(echo "$res" | grep -o 'sweep: .*')"
   done
 done
 LAMMPS_ROUNDS=2 timeout 300 benches/lammps/scaling.sh 100000 "$counts" 1000 120 3 "$sdem" | tee -a "$results"
@@ -81,7 +81,7 @@ if [ -f $work/dense_100000.data ]; then
     for t in $counts; do
       for order in file strips; do
         res=$("$sdem" bench --from $work/order_probe/$order/checkpoint.bin --steps 300 --warmup 20 --threads "$t" 2>&1)
-        say "LAMMPS's packing in order=$order threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
+        say "LAMMPS's packing in order=$order threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*') | $(echo "$res" | grep -o 'sweep: .*')"
       done
     done
   done

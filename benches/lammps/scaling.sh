@@ -31,7 +31,7 @@ for r in $(seq 1 "$rounds"); do
     for model in rigid full; do
       steps=$ssteps; [ "$model" = rigid ] && steps=$((3 * ssteps))
       res=$("$sdem" bench --grains "$n" --steps "$steps" --warmup 20 --threads "$t" --model "$model")
-      say "sdem model=$model threads=$t N=$n round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*')"
+      say "sdem model=$model threads=$t N=$n round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*') | $(echo "$res" | grep -o 'sweep: .*')"
     done
   done
   if [ "$lammps" = 1 ] && [ "$r" -le "$lrounds" ]; then
