@@ -1450,49 +1450,34 @@ fn stress_targets_out_of_reach_are_warned_about() {
 #[test]
 fn sort_sample_on_bad_input() {
     let scratch = Scratch::new("sort_sample");
-    let missing = scratch.path("missing.csv");
-    let out = scratch.path("out.csv");
-    let stderr = clean_failure(
-        "missing file",
-        &sdem(&[
+    let sort_fails = |what: &str, input: &Path, output: &Path, needles: &[&str]| {
+        let out = sdem(&[
             std::ffi::OsStr::new("sort-sample"),
-            missing.as_os_str(),
-            out.as_os_str(),
-        ]),
-    );
-    assert_mentions(
+            input.as_os_str(),
+            output.as_os_str(),
+        ]);
+        assert_mentions(what, &clean_failure(what, &out), needles);
+    };
+    let out = scratch.path("out.csv");
+    sort_fails(
         "missing file",
-        &stderr,
+        &scratch.path("missing.csv"),
+        &out,
         &["cannot read the sample file", "missing.csv"],
     );
     let bad = scratch.write("bad.csv", "x,y,radius\n0.1,0.1,0.01\n0.2,0.1\n");
-    let stderr = clean_failure(
+    sort_fails(
         "short line",
-        &sdem(&[
-            std::ffi::OsStr::new("sort-sample"),
-            bad.as_os_str(),
-            out.as_os_str(),
-        ]),
-    );
-    assert_mentions(
-        "short line",
-        &stderr,
+        &bad,
+        &out,
         &["bad.csv:3:", "2 fields, expected 3"],
     );
     assert!(!out.exists(), "a failed sort wrote {}", out.display());
     let good = scratch.write("good.csv", "x,y,radius\n0.1,0.1,0.01\n");
-    let nowhere = scratch.path("no/such/folder/out.csv");
-    let stderr = clean_failure(
+    sort_fails(
         "output folder missing",
-        &sdem(&[
-            std::ffi::OsStr::new("sort-sample"),
-            good.as_os_str(),
-            nowhere.as_os_str(),
-        ]),
-    );
-    assert_mentions(
-        "output folder missing",
-        &stderr,
+        &good,
+        &scratch.path("no/such/folder/out.csv"),
         &["cannot write", "out.csv"],
     );
 }
