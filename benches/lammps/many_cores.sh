@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue #16's figures on a many-core machine, in one call of about 6 minutes on 16 cores (220 s
-# on the lent machine of the thirty-fourth session, before the probe of 0.):
+# on the lent machine of the thirty-fourth session, before the probes 0. and 4.):
 #  0. the topology lscpu reports, and whether two processors share a core or a cache: `sdem
 #     bench` (rigid, 10^5) on processor 0, then two threads pinned to 0 and 1, and to 0 and
 #     half the count;
