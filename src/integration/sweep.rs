@@ -269,7 +269,7 @@ pub(super) fn sweep<'a>(
         pair_chunk_ends: rows.pair_chunk_ends,
     };
     let mut results: Vec<ChunkResults> = (0..chunks).map(|_| ChunkResults::default()).collect();
-    let plan = Plan::new(rows.earliest_first_grains, rayon::current_num_threads());
+    let plan = SweepPlan::new(rows.earliest_first_grains, rayon::current_num_threads());
     let run = plan.run;
     results
         .par_chunks_mut(run)
@@ -315,36 +315,15 @@ pub(super) fn sweep<'a>(
     SweepResults {
         chunks: results,
         pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
-        plan: SweepPlan {
-            chunks,
-            waiting: plan.waiting,
-            fused: plan.fused,
-        },
+        plan,
     }
 }
 
 /// How the sweep would take grains numbered as `neighbors`' list numbers them on `threads`
-/// threads: the grain chunks, those of them that would wait for the second round, and whether
-/// the sweep would still fuse the two passes (see [`Plan`]). For a check of a sample's
-/// numbering before a run (`sample::order::threads_wait_warning`).
+/// threads: the plan a step of those grains would follow. For a check of a sample's numbering
+/// before a run (`sample::order::threads_wait_warning`).
 pub fn sweep_plan_of(neighbors: &NeighborList, grains: usize, threads: usize) -> SweepPlan {
-    let earliest = earliest_first_grains(neighbors, grains);
-    let plan = Plan::new(&earliest, threads);
-    SweepPlan {
-        chunks: earliest.len(),
-        waiting: plan.waiting,
-        fused: plan.fused,
-    }
-}
-
-/// How a sweep shares its grain chunks among its tasks (see [`Plan`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct SweepPlan {
-    pub chunks: usize,
-    /// The chunks whose grains wait for the second round (on one thread: none).
-    pub waiting: usize,
-    /// Whether the pair and grain passes ran as one sweep; else one after the other.
-    pub fused: bool,
+    SweepPlan::new(&earliest_first_grains(neighbors, grains), threads)
 }
 
 /// The sweeps of a run so far ([`World::sweep_tally`](super::World)): how many, how many took
@@ -392,19 +371,21 @@ impl std::fmt::Display for SweepTally {
 }
 
 /// How the sweep's tasks share the chunks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Plan {
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SweepPlan {
     /// Chunks a task sweeps: one run a thread, so that one thread sweeps every chunk at once.
     run: usize,
-    /// The chunks whose grains wait for the second round (see [`waits`]).
-    waiting: usize,
+    pub chunks: usize,
+    /// The chunks whose grains would wait for the second round with the passes fused (see
+    /// [`waits`]; on one thread, none): what decides `fused`.
+    pub waiting: usize,
     /// Whether a run's grains follow its pairs (but those of the chunks that wait); else every
     /// grain waits for the second round, and the sweep is the pair pass and then the grain
     /// pass.
-    fused: bool,
+    pub fused: bool,
 }
 
-impl Plan {
+impl SweepPlan {
     fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
         let chunks = earliest_first_grains.len();
         let run = chunks.div_ceil(threads.max(1)).max(1);
@@ -417,6 +398,7 @@ impl Plan {
         // 0.86 times as fast as with the two passes).
         Self {
             run,
+            chunks,
             waiting,
             fused: waiting * MOST_WAITING <= chunks,
         }
@@ -557,9 +539,8 @@ mod tests {
                 }
                 let n = world.grains.len();
                 let plan = sweep_plan_of(&world.neighbors, n, threads);
-                let run = n.div_ceil(GRAIN_CHUNK).div_ceil(threads);
                 let waiting = (0..world.earliest_first_grains.len())
-                    .filter(|&c| waits(&world.earliest_first_grains, c, run))
+                    .filter(|&c| waits(&world.earliest_first_grains, c, plan.run))
                     .count();
                 (world.sweep_tally, plan, waiting)
             });
@@ -633,7 +614,7 @@ mod tests {
                     for _ in 0..40 {
                         world.step().unwrap();
                     }
-                    let plan = Plan::new(&world.earliest_first_grains, threads);
+                    let plan = SweepPlan::new(&world.earliest_first_grains, threads);
                     let waiting = (0..world.earliest_first_grains.len())
                         .filter(|&c| {
                             !plan.fused || waits(&world.earliest_first_grains, c, plan.run)

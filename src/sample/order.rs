@@ -36,6 +36,11 @@ pub fn median_step_in_radii(grains: &[Grain]) -> f64 {
     *median / mean_radius
 }
 
+/// What both warnings about a file's order ask of the user.
+const SORT_ROWS: &str = "The order changes no physics, only the rounding of sums: sort the \
+                         file's rows, strip by strip, with `sdem sort-sample FILE SORTED.csv` \
+                         and name the sorted file";
+
 /// A warning for a sample file (`field`: the scenario field that names it) of at least
 /// [`NUMBERING_CHECK_GRAINS`] grains whose numbering is scattered in space, or `None`. The
 /// step reads each pair's grains and gathers each grain's contacts by number: LAMMPS's packing
@@ -52,9 +57,7 @@ pub fn numbering_warning(field: &str, grains: &[Grain]) -> Option<String> {
             "{field}: grains numbered one after the other lie {step:.0} mean radii apart \
              (median; about 2 in a spatial order): the file's order is scattered in space, \
              and SDEM steps such a sample about half as fast as the same grains in a spatial \
-             order. The order changes no physics, only the rounding of sums: sort the file's \
-             rows, strip by strip, with `sdem sort-sample FILE SORTED.csv` and name the sorted \
-             file (sdem keeps a file's numbering, which its outputs use)"
+             order. {SORT_ROWS} (sdem keeps a file's numbering, which its outputs use)"
         )
     })
 }
@@ -66,8 +69,9 @@ pub fn numbering_warning(field: &str, grains: &[Grain]) -> Option<String> {
 /// the other half of the numbering. On two threads the step's sweep then takes its pair and
 /// grain passes one after the other, as [`sweep_plan_of`](crate::integration::sweep_plan_of)
 /// (the sweep's own rule) tells from the grains' candidate pairs (with `skin`, the run's
-/// neighbour skin): LAMMPS's 10^5 packing as written by two processes stepped 2.41–2.53e7
-/// grain-steps/s on two threads, in strips 2.61–2.67e7 (issue #16, thirty-fourth session).
+/// neighbour skin): LAMMPS's 10^5 packing as written by two processes stepped 3–19% slower on
+/// two threads than in strips, 8% in the median of nine paired rounds over four sittings
+/// (2.31–2.58e7 against 2.61–2.91e7 grain-steps/s; issue #16, thirty-fourth session).
 pub fn threads_wait_warning(field: &str, grains: &[Grain], skin: f64) -> Option<String> {
     if grains.len() < NUMBERING_CHECK_GRAINS {
         return None;
@@ -82,10 +86,8 @@ pub fn threads_wait_warning(field: &str, grains: &[Grain], skin: f64) -> Option<
             "{field}: grains meet grains far back in the file's numbering ({} of {} chunks of \
              {} grains would wait on two threads: rows written piece by piece, as LAMMPS writes \
              each MPI process's atoms in turn), and SDEM's step on two threads or more then \
-             takes its pair and grain passes one after the other (5-10% slower on LAMMPS's \
-             10^5 packing). The order changes no physics, only the rounding of sums: sort the \
-             rows, strip by strip, with `sdem sort-sample FILE SORTED.csv` and name the sorted \
-             file",
+             takes its pair and grain passes one after the other (8% slower on LAMMPS's 10^5 \
+             packing, the median of nine paired rounds). {SORT_ROWS}",
             plan.waiting,
             plan.chunks,
             crate::integration::GRAIN_CHUNK
