@@ -67,20 +67,15 @@ for model in rigid full; do
 done
 # 4. The order of a sample file: LAMMPS's packing (work/dense_100000.data) as rigid sdem discs
 #    in its file's order (two halves: its two MPI processes' atoms) and sorted into strips by
-#    `sdem sort-sample`, `bench --from` each after the same 10 relaxing steps, on 1, 2, 4, ...
+#    `sdem sort-sample` (packing.sh's sdem_packing), `bench --from` each, on 1, 2, 4, ...
 #    threads: how much the sweep's fallback to two passes costs where many threads share a step.
 if [ -f $work/dense_100000.data ]; then
-  (
-    cd $work && rm -rf order_probe && mkdir order_probe && cd order_probe
-    python3 ../../to_sdem.py ../dense_100000.data file 10 >/dev/null
-    "$sdem" sort-sample file_grains.csv strips_grains.csv >/dev/null
-    sed 's/file_grains.csv/strips_grains.csv/; s/name: "file"/name: "strips"/' file.ron >strips.ron
-    for order in file strips; do "$sdem" run $order.ron --out $order --quiet >/dev/null 2>&1; done
-  )
+  (cd $work && . ../packing.sh && sdem_packing 100000 "$sdem" 2>/dev/null)
   for r in 1 2; do
     for t in $counts; do
       for order in file strips; do
-        res=$("$sdem" bench --from $work/order_probe/$order/checkpoint.bin --steps 300 --warmup 20 --threads "$t" 2>&1)
+        dir=sdem_100000; [ $order = strips ] && dir=sdem_100000_strips
+        res=$("$sdem" bench --from $work/$dir/checkpoint.bin --steps 300 --warmup 20 --threads "$t" 2>&1)
         say "LAMMPS's packing in order=$order threads=$t round=$r $(echo "$res" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$res" | grep -o 'frames .*') | $(echo "$res" | grep -o 'sweep: .*')"
       done
     done

@@ -76,7 +76,7 @@ if passes:
         med = statistics.median(v)
         if med == 0:
             continue
-        up = statistics.median(base) / med if base and med > 0 else float("nan")
+        up = statistics.median(base) / med if base else float("nan")
         lines.append(f"sdem {model:5s} {name:14s} {t:3d}: {med:.3f} | {up:6.2f}")
 print("\n".join(lines))
 open(path, "a").write("\n".join(lines) + "\n")
