@@ -28,8 +28,8 @@ use crate::boundary::periodic::{PeriodicCell, symmetric_dyad};
 use crate::contact::friction::TangentialResponse;
 use crate::contact::law::{SecantLaw, damped_normal_force};
 use crate::geometry::circle::{
-    degenerate_chord, disc_chord, disc_disc, disc_swallowed, discs_apart, shallow_cap,
-    shallow_segment_area,
+    chord_segment_area, degenerate_chord, disc_chord, disc_disc, disc_swallowed, discs_apart,
+    shallow_cap, shallow_segment_area,
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
@@ -557,7 +557,11 @@ impl<'a> PairPass<'a> {
         };
         disc_pair_forces_dispatch(input, &self.params.law, self.params.contact_damping, out);
         let radius = [&input.first.radius, &input.second.radius];
-        if !FRICTIONAL && let Some(contact) = out.contacts_if_regular(radius) {
+        if !FRICTIONAL
+            && let Some(contact) = out
+                .contacts_if_regular(radius)
+                .or_else(|| out.contacts_with_exact_deep_caps(radius))
+        {
             self.record_regular_block(out, &contact, &branches, states, actives, records, sums);
             return;
         }
@@ -1364,12 +1368,59 @@ impl DiscPairForces<PairLanes> {
     fn regular(&self, lane: usize, radius: &[f64; 2]) -> bool {
         // `&`, not `&&`: the tests have no effects, and without branches they run on whole
         // vectors in `contacts_if_regular`.
+        self.regular_but_caps(lane, radius) & self.shallow_caps(lane)
+    }
+
+    /// [`regular`](Self::regular) but for the depth of the caps: the circles cross, and the
+    /// law holds.
+    #[inline(always)]
+    fn regular_but_caps(&self, lane: usize, radius: &[f64; 2]) -> bool {
         let at = |v: &PairLanes| v.0[lane];
         !disc_swallowed(at(&self.distance), radius[0], radius[1])
             & !degenerate_chord(at(&self.half_chord), at(&self.reach))
-            & shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
-            & shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
             & SecantLaw::in_domain(at(&self.response.denominator), at(&self.response.floor))
+    }
+
+    /// Whether both caps of lane `lane` lie in the range of the kernel's series
+    /// ([`shallow_cap`]).
+    #[inline(always)]
+    fn shallow_caps(&self, lane: usize) -> bool {
+        let at = |v: &PairLanes| v.0[lane];
+        shallow_cap(at(&self.chord_distance[0]), at(&self.sine[0]))
+            & shallow_cap(at(&self.chord_distance[1]), at(&self.sine[1]))
+    }
+
+    /// [`contacts_if_regular`](Self::contacts_if_regular) of a block that is not regular,
+    /// where the only lanes out of the regular case are those with a deep cap (past the range
+    /// of the kernel's series): those caps take [`chord_segment_area`] (the one-pair path's
+    /// bits, its closed form) in place of the series, and the block is regular. On `sdem
+    /// bench`'s lattice a third of the blocks hold a deep cap (one lane in 25); such a block
+    /// went lane by lane, its deep pairs by the one-pair path. One lane at a time, out of the
+    /// common path: the arc tangent in every lane of such blocks, or in the kernel, cost more
+    /// than the one-pair path it saved.
+    #[cold]
+    #[inline(never)]
+    fn contacts_with_exact_deep_caps(&mut self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        let mut contact = [false; LANES];
+        for (lane, contact) in contact.iter_mut().enumerate() {
+            let radius = [radius[0].0[lane], radius[1].0[lane]];
+            *contact = !discs_apart(self.distance_squared.0[lane], self.reach.0[lane]);
+            if *contact && !self.regular_but_caps(lane, &radius) {
+                return None;
+            }
+        }
+        for (lane, &contact) in contact.iter().enumerate() {
+            if contact && !self.shallow_caps(lane) {
+                for (k, radius) in radius.iter().enumerate() {
+                    self.cap_area[k].0[lane] = chord_segment_area(
+                        radius.0[lane],
+                        self.chord_distance[k].0[lane],
+                        self.half_chord.0[lane],
+                    );
+                }
+            }
+        }
+        Some(contact)
     }
 
     /// Which lanes are contacts, when [`lane`](Self::lane) is apart or a contact for every
