@@ -1401,23 +1401,29 @@ impl DiscPairForces<PairLanes> {
     #[cold]
     #[inline(never)]
     fn contacts_with_exact_deep_caps(&mut self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        // The lanes' tests without a branch a lane (a third of such blocks' lanes would be
+        // mispredicted), the deep ones as bits.
         let mut contact = [false; LANES];
+        let mut irregular = false;
+        let mut deep = 0u32;
         for (lane, contact) in contact.iter_mut().enumerate() {
-            let radius = [radius[0].0[lane], radius[1].0[lane]];
+            let lane_radius = [radius[0].0[lane], radius[1].0[lane]];
             *contact = !discs_apart(self.distance_squared.0[lane], self.reach.0[lane]);
-            if *contact && !self.regular_but_caps(lane, &radius) {
-                return None;
-            }
+            irregular |= *contact & !self.regular_but_caps(lane, &lane_radius);
+            deep |= ((*contact & !self.shallow_caps(lane)) as u32) << lane;
         }
-        for (lane, &contact) in contact.iter().enumerate() {
-            if contact && !self.shallow_caps(lane) {
-                for (k, radius) in radius.iter().enumerate() {
-                    self.cap_area[k].0[lane] = chord_segment_area(
-                        radius.0[lane],
-                        self.chord_distance[k].0[lane],
-                        self.half_chord.0[lane],
-                    );
-                }
+        if irregular {
+            return None;
+        }
+        while deep != 0 {
+            let lane = deep.trailing_zeros() as usize;
+            deep &= deep - 1;
+            for (k, radius) in radius.iter().enumerate() {
+                self.cap_area[k].0[lane] = chord_segment_area(
+                    radius.0[lane],
+                    self.chord_distance[k].0[lane],
+                    self.half_chord.0[lane],
+                );
             }
         }
         Some(contact)
