@@ -1665,6 +1665,70 @@ mod tests {
     }
 
     #[test]
+    fn a_block_irregular_only_by_its_deep_caps_takes_their_exact_areas() {
+        // Expectation: a block of circle contacts whose only lanes out of the kernel's regular
+        // case have a deep cap (sin theta > 0.3, the law in its domain) is a regular block once
+        // those caps take chord_segment_area: every lane's cap areas are disc_disc's, bit for
+        // bit, and the deep lane's is the closed form's, not the series' it had. A block with
+        // another irregular lane (a swallowed pair) is left as it was, to the one-pair path.
+        let law = SecantLaw::new(1.0, 0.58, 2.0);
+        fn lanes(f: impl Fn(usize) -> f64) -> PairLanes {
+            PairLanes::from_fn(f)
+        }
+        // Unit circles 1.98 apart (shallow caps, sin theta 0.2), lane 3 1.8 apart (depth 0.1,
+        // sin theta 0.44).
+        let distance = |l: usize| if l == 3 { 1.8 } else { 1.98 };
+        let mut input = DiscPairs {
+            first: DiscLanes {
+                center: [lanes(|l| 5.0 * l as f64), lanes(|_| 0.0)],
+                radius: lanes(|_| 1.0),
+                mass: lanes(|_| 3.0),
+                velocity: [lanes(|_| 0.1), lanes(|_| 0.0)],
+                omega: lanes(|_| 0.2),
+            },
+            second: DiscLanes {
+                center: [lanes(|l| 5.0 * l as f64 + distance(l)), lanes(|_| 0.0)],
+                radius: lanes(|_| 1.0),
+                mass: lanes(|_| 3.0),
+                velocity: [lanes(|_| -0.1), lanes(|_| 0.0)],
+                omega: lanes(|_| -0.2),
+            },
+            affine_rate: [lanes(|_| 0.0), lanes(|_| 0.0)],
+        };
+        let mut out = DiscPairForces::default();
+        disc_pair_forces_dispatch(&input, &law, 1.0, &mut out);
+        let radius = [&input.first.radius, &input.second.radius];
+        assert!(out.contacts_if_regular(radius).is_none());
+        let series = out.cap_area[0].0[3];
+        let contact = out.contacts_with_exact_deep_caps(radius);
+        assert_eq!(contact, Some([true; LANES]));
+        for lane in 0..LANES {
+            let at = |v: &PairLanes| v.0[lane];
+            let (first, second) = (&input.first, &input.second);
+            let center = |c: &[PairLanes; 2]| DVec2::new(at(&c[0]), at(&c[1]));
+            let Overlap::Contact(exact) = disc_disc(
+                center(&first.center),
+                at(&first.radius),
+                center(&second.center),
+                at(&second.radius),
+            ) else {
+                panic!("lane {lane} is a contact");
+            };
+            assert_eq!(at(&out.cap_area[0]).to_bits(), exact.cap_area_i.to_bits());
+            assert_eq!(at(&out.cap_area[1]).to_bits(), exact.cap_area_j.to_bits());
+        }
+        assert_ne!(out.cap_area[0].0[3], series);
+
+        // Lane 5's second circle swallowed by its first.
+        input.second.radius.0[5] = 0.3;
+        input.second.center[0].0[5] = input.first.center[0].0[5] + 0.5;
+        disc_pair_forces_dispatch(&input, &law, 1.0, &mut out);
+        let radius = [&input.first.radius, &input.second.radius];
+        assert!(out.contacts_with_exact_deep_caps(radius).is_none());
+        assert_eq!(out.cap_area[0].0[3], series);
+    }
+
+    #[test]
     fn lanes_of_circle_pairs_give_the_one_pair_paths_bits() {
         // Expectation: the lane kernel is the one-pair path's sequence of operations, and a
         // lane outside its regular case is handed to that path; a frictionless block without
