@@ -67,6 +67,9 @@ pub(super) struct BlockOutcome {
     /// inverted strain, a speed past the wave speed); the caller runs the one-grain checks on
     /// it, which decide. Clear bits passed every check.
     pub suspect: u32,
+    /// A rigid block only: it wrote its four grains' frames, circles all (each grain's strains
+    /// equal), as [`Frame::write_circle`] writes them.
+    pub circle_frames: bool,
 }
 
 /// Whether this processor runs blocks (else the grain pass takes every grain one by one).
@@ -119,25 +122,32 @@ pub(super) fn advance_full_block(
 
 /// Advances the four rigid-level grains `grains` over a plain step as
 /// [`advance_full_block`] does full-level ones: the stresses and the rigid-body motion of the
-/// one-grain update at the rigid level, bit for bit, and their stress records. Their frames
-/// are left to the caller (a rigid grain's may be a circle's). Only where
+/// one-grain update at the rigid level, bit for bit, and their stress records. Where the four
+/// are circles (each grain's strains equal: [`Frame::is_circle`]) it writes their frames'
+/// first lines from the lanes, as [`Frame::write_circle`] does (and says so in
+/// [`BlockOutcome::circle_frames`]); other frames are left to the caller. Only where
 /// [`blocks_available`] says so.
 #[inline(always)]
 pub(super) fn advance_rigid_block(
     grains: &mut [Grain],
     stresses: &mut [GrainStress],
+    frames: &mut [Frame],
     loads: &BlockLoads,
     contacts: &[[u32; 2]; BLOCK_GRAINS],
     constants: &BlockConstants<'_>,
 ) -> BlockOutcome {
-    assert!(grains.len() == BLOCK_GRAINS && stresses.len() == BLOCK_GRAINS);
+    assert!(
+        grains.len() == BLOCK_GRAINS
+            && stresses.len() == BLOCK_GRAINS
+            && frames.len() == BLOCK_GRAINS
+    );
     #[cfg(target_arch = "x86_64")]
     {
         assert!(blocks_available());
         // SAFETY: the processor has AVX (asserted just above), and the slices hold four
-        // records each; a rigid block reads no frame and no direction.
+        // records each; a rigid block reads no direction.
         unsafe {
-            avx::advance_block::<true>(grains, stresses, &mut [], loads, contacts, &[], constants)
+            avx::advance_block::<true>(grains, stresses, frames, loads, contacts, &[], constants)
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -298,6 +308,12 @@ mod avx {
         assert!(size_of::<Grain>() == 13 * 8);
         assert!(size_of::<GrainStress>() == 7 * 8);
         assert!(size_of::<Frame>() == 16 * 8);
+        // A circle's first line as the rigid block writes it: centre, radius, mass; velocity,
+        // spin, the flag's byte.
+        use std::mem::offset_of;
+        assert!(offset_of!(Frame, center) == 0 && offset_of!(Frame, bounding_radius) == 16);
+        assert!(offset_of!(Frame, mass) == 24 && offset_of!(Frame, velocity) == 32);
+        assert!(offset_of!(Frame, omega) == 48 && offset_of!(Frame, circle) == 56);
     };
 
     /// Four `f64` lanes in an AVX register, with [`Real`]'s arithmetic: the operations of
@@ -393,11 +409,11 @@ mod avx {
     }
 
     /// See [`super::advance_full_block`]; where `RIGID`, [`super::advance_rigid_block`]
-    /// (`frames` and `e1` unread).
+    /// (`e1` unread).
     ///
     /// # Safety
-    /// The processor must have AVX, and `grains` and `stresses` must hold four records each,
-    /// `frames` and `e1` too unless `RIGID`.
+    /// The processor must have AVX, and `grains`, `stresses` and `frames` must hold four
+    /// records each, `e1` too unless `RIGID`.
     #[target_feature(enable = "avx")]
     #[allow(clippy::too_many_arguments)]
     pub(super) unsafe fn advance_block<const RIGID: bool>(
@@ -536,6 +552,27 @@ mod avx {
         store(lanes.area, &mut outcome.area);
         store(lanes.elastic_energy, &mut outcome.elastic_energy);
         if RIGID {
+            // Circles all: their frames' first lines (`Frame::write_circle`'s centre, radius
+            // `R (1 + eps1)`, mass, velocity, spin and flag) by two transposes.
+            let circles = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(d.eps1.0, d.eps2.0));
+            if circles == 0b1111 {
+                let bounding_radius = d.radius * (F64x4::splat(1.0) + d.eps1);
+                // `true` in the flag's byte, zeros in the line's padding after it.
+                let flag = _mm256_castsi256_pd(_mm256_set1_epi64x(1));
+                let heads = transpose([
+                    d.center[0].0,
+                    d.center[1].0,
+                    bounding_radius.0,
+                    lanes.mass.0,
+                ]);
+                let tails = transpose([d.velocity[0].0, d.velocity[1].0, d.omega.0, flag]);
+                let lines = frames.as_mut_ptr().cast::<f64>();
+                for l in 0..BLOCK_GRAINS {
+                    _mm256_storeu_pd(lines.add(16 * l), heads[l]);
+                    _mm256_storeu_pd(lines.add(16 * l + 4), tails[l]);
+                }
+                outcome.circle_frames = true;
+            }
             return outcome;
         }
 

@@ -384,13 +384,18 @@ impl GrainPass<'_> {
                 *lane_contacts = [load.contacts, load.wall_contacts];
             }
             let outcome = if rigid {
-                advance_rigid_block(
+                let outcome = advance_rigid_block(
                     &mut chunk.grains[block.clone()],
                     &mut chunk.stresses[block.clone()],
+                    &mut chunk.frames[block.clone()],
                     &loads,
                     &contacts,
                     &block_constants,
-                )
+                );
+                if outcome.circle_frames {
+                    done |= 1 << (start / BLOCK_GRAINS);
+                }
+                outcome
             } else {
                 done |= 1 << (start / BLOCK_GRAINS);
                 advance_full_block(
@@ -438,15 +443,21 @@ impl GrainPass<'_> {
                 sums.totals.elastic_energy += outcome.elastic_energy.0[l];
                 sums.contact_ends += pair_contacts as u64;
                 self.follow_box(grain, &mut chunk.wraps[k], sums);
-                if rigid {
+                if rigid && !outcome.circle_frames {
                     // `write_frames` writes its frame, as one by one.
                     continue;
                 }
                 let frame = &mut chunk.frames[k];
-                if stepped_down {
+                // A grain whose level changed takes the frame of its new level (a rigid one
+                // that rose is no longer a circle), as `write_frames` would have written it.
+                let changed = stepped_down || (rigid && level.level != ModelLevel::Rigid);
+                if changed {
                     frame.write(grain, level.level, density);
                     sums.circle_frames += frame.circle as usize;
-                } else if self.carry.is_some() || self.cell_motion.is_some() {
+                    continue;
+                }
+                sums.circle_frames += rigid as usize;
+                if self.carry.is_some() || self.cell_motion.is_some() {
                     // The block wrote the frame before the box moved the grain, and a frame's
                     // centre is the only part of it that the move changes.
                     frame.center = grain.center;
@@ -1374,6 +1385,13 @@ mod tests {
                     }
                 });
                 let mut grains = grains;
+                // Some blocks of circles only (equal strains in every lane), whose frames the
+                // rigid block writes.
+                if trial % 7 == 3 {
+                    for grain in &mut grains {
+                        grain.eps2 = grain.eps1;
+                    }
+                }
                 // Lanes the checks must catch: a NaN, an inverted strain, a runaway.
                 match trial {
                     10 => grains[2].velocity.y = f64::NAN,
@@ -1479,19 +1497,32 @@ mod tests {
                 }
 
                 // The same grains at the rigid level: the rigid block against the one-grain
-                // update at that level (which reads no principal direction); frames are the
-                // caller's.
+                // update at that level (which reads no principal direction); the frames of a
+                // block of circles as `Frame::write_circle` writes them, the others the
+                // caller's (left as they were).
                 let (updated, updates) = one_by_one(ModelLevel::Rigid);
                 let mut block = grains;
                 let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
+                let mut frames = [Frame::default(); BLOCK_GRAINS];
                 let outcome = advance_rigid_block(
                     &mut block,
                     &mut stresses,
+                    &mut frames,
                     &block_loads,
                     &contacts,
                     &block_constants,
                 );
                 flagged += compare("rigid", &block, &stresses, &outcome, &updated, &updates);
+                let circles = grains.iter().all(|g| g.eps1 == g.eps2);
+                assert_eq!(outcome.circle_frames, circles, "case {case}, trial {trial}");
+                for l in 0..BLOCK_GRAINS {
+                    let mut frame = Frame::default();
+                    if circles {
+                        frame.write_circle(&updated[l], density);
+                    }
+                    let at = format!("circle frame: case {case}, trial {trial}, lane {l}");
+                    assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");
+                }
             }
         }
         assert_eq!(
