@@ -282,7 +282,8 @@ impl GrainPass<'_> {
     /// A chunk's grains on a plain step by blocks of [`BLOCK_GRAINS`]. A block whose grains are
     /// all at the full level, or all at the rigid level: its contact loads first, grain by
     /// grain, then their updates side by side ([`advance_full_block`], which writes their
-    /// frames too, or [`advance_rigid_block`], which leaves them to [`write_frames`]), then
+    /// frames too, or [`advance_rigid_block`], which writes them where its four grains are
+    /// circles and else leaves them to [`write_frames`]), then
     /// each grain's adaptive level, checks, sums and failures in grain order (a grain's first
     /// wall failure before its update's, as one by one). Any other block, and the chunk's last
     /// grains, one by one ([`GrainPass::one_grain`]). `chunk_level`: the level of every grain
