@@ -345,6 +345,11 @@ impl SweepTally {
         self.chunks = plan.chunks;
     }
 
+    /// The chunks that waited, on average over the sweeps (0 without a sweep).
+    pub fn mean_waiting_chunks(&self) -> f64 {
+        self.waiting_chunks as f64 / self.sweeps.max(1) as f64
+    }
+
     /// The sweeps since `before`, a tally of the same run taken earlier.
     pub fn since(&self, before: &SweepTally) -> SweepTally {
         SweepTally {
@@ -364,7 +369,7 @@ impl std::fmt::Display for SweepTally {
             "{} sweeps, {} in two passes; {:.1} of {} chunks waited (mean)",
             self.sweeps,
             self.two_passes,
-            self.waiting_chunks as f64 / self.sweeps.max(1) as f64,
+            self.mean_waiting_chunks(),
             self.chunks
         )
     }

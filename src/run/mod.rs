@@ -601,7 +601,7 @@ pub(crate) fn write_summary(
         writeln!(
             f,
             "sweep_waiting_chunks_mean = {:.1} (of {})",
-            t.waiting_chunks as f64 / t.sweeps.max(1) as f64,
+            t.mean_waiting_chunks(),
             t.chunks
         )?;
     }
