@@ -382,7 +382,8 @@ mod disc_pairs {
     }
 }
 
-/// The polygon contact's common path four pairs at a time (`grain_grain_block`, AVX) against
+/// The polygon contact's common path four pairs at a time (`grain_grain_block`, AVX) and eight
+/// (`grain_grain_blocks`: AVX-512 where the processor has it, else two blocks of four) against
 /// the one-pair path four times, on four pairs at depths 0.01 to 0.15 of a diameter whose j
 /// moves back and forth by a tenth of a node spacing along the line of centres from call to
 /// call (a contact under load from step to step; a dense step moves a grain by far less). Each
@@ -391,7 +392,7 @@ mod disc_pairs {
 mod polygon_lanes {
     use super::pair;
     use sdem::geometry::intersection_lanes::{
-        BLOCK, BlockContacts, LanePair, OwnedLaneShape, grain_grain_block,
+        BLOCK, BlockContacts, LanePair, OwnedLaneShape, grain_grain_block, grain_grain_blocks,
     };
     use sdem::geometry::{ContourTable, GrainShape, PairHint, grain_grain_hinted};
     use std::hint::black_box;
@@ -451,6 +452,50 @@ mod polygon_lanes {
         // What the bench means to time: where the processor has AVX, every lane on the path.
         if sdem::geometry::intersection_lanes::block_available() {
             assert_eq!(on_path, BLOCK * call, "lanes left the path");
+        }
+    }
+
+    /// The same four pairs twice over, eight lanes a call.
+    #[divan::bench]
+    fn eight_in_lanes(bencher: divan::Bencher) {
+        let table = ContourTable::new(1.0);
+        let (pairs, four_hints) = moving_pairs(&table);
+        let mut hints = [four_hints, four_hints].concat();
+        let shapes =
+            pairs.map(|at| at.map(|(i, j)| [OwnedLaneShape::of(&i), OwnedLaneShape::of(&j)]));
+        let mut contacts = [BlockContacts::default(); 2];
+        let mut call = 0usize;
+        let mut on_path = 0;
+        bencher
+            .counter(divan::counter::ItemsCount::new(2 * BLOCK))
+            .bench_local(|| {
+                call += 1;
+                let block: [LanePair; 2 * BLOCK] = std::array::from_fn(|l| {
+                    let [i, j] = &shapes[l % BLOCK][call & 1];
+                    LanePair {
+                        i: i.lane_shape(),
+                        j: j.lane_shape(),
+                        hint: hints[l],
+                        ..Default::default()
+                    }
+                });
+                grain_grain_blocks(&table, black_box(&block), false, 2 * BLOCK, &mut contacts);
+                for (l, hint) in hints.iter_mut().enumerate() {
+                    match contacts[l / BLOCK].lane(l % BLOCK) {
+                        Some((_, next)) => {
+                            *hint = next;
+                            on_path += 1;
+                        }
+                        None => {
+                            let (i, j) = &pairs[l % BLOCK][call & 1];
+                            grain_grain_hinted(&table, i, j, hint);
+                        }
+                    }
+                }
+                black_box(&contacts);
+            });
+        if sdem::geometry::intersection_lanes::block_available() {
+            assert_eq!(on_path, 2 * BLOCK * call, "lanes left the path");
         }
     }
 

@@ -11,8 +11,9 @@
 //! computed again by the one-pair path, which handles those cases.
 //!
 //! Pairs of contour polygons that were in contact last step go four at a time through the
-//! common path of their contact in AVX lanes ([`grain_grain_block`]): the pass fills a block
-//! with the next such pairs within `POLYGON_WINDOW` and takes their results in pair order
+//! common path of their contact in AVX lanes, eight at a time in AVX-512 ones where the
+//! processor has them ([`grain_grain_blocks`]): the pass fills one block (or two) with the next
+//! such pairs within `POLYGON_WINDOW` and takes their results in pair order
 //! (`PolygonsAhead`). The same lanes then give the block's normal forces (the law, the
 //! relative velocity at the contact point and the dashpot: `polygon_pair_forces`). A lane gives
 //! the one-pair path's bits or leaves the pair to it (a lane whose law left its domain leaves
@@ -33,7 +34,8 @@ use crate::geometry::circle::{
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
-    BLOCK, BlockContacts, LaneContact, LanePair, block_available, grain_grain_block,
+    BLOCK, BlockContacts, LaneContact, LanePair, block_available, grain_grain_blocks,
+    wide_blocks_available,
 };
 use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -172,6 +174,18 @@ impl<'a> PairPass<'a> {
             // The same call as below's, on purpose: the compiler specialises each (one call
             // for both cost the full level 91 instructions a grain-step, 3%).
             if POLYGONS && let Some(lane) = polygons.computed(k) {
+                // The second block of two computed at once (eight lanes): as the first below.
+                if !FRICTIONAL && self.periodic.is_none() && polygons.holds_block_from(lane, k) {
+                    let block = k..k + BLOCK;
+                    polygons.record_block(
+                        lane,
+                        &mut states[block.clone()],
+                        &mut actives[block.clone()],
+                        &mut records[block],
+                    );
+                    k += BLOCK;
+                    continue;
+                }
                 self.polygon_lane::<FRICTIONAL>(
                     p,
                     &polygons,
@@ -229,10 +243,11 @@ impl<'a> PairPass<'a> {
                 if !FRICTIONAL
                     && self.periodic.is_none()
                     && lane == Some(0)
-                    && polygons.holds_contacts_from(k)
+                    && polygons.holds_block_from(0, k)
                 {
                     let block = k..k + BLOCK;
                     polygons.record_block(
+                        0,
                         &mut states[block.clone()],
                         &mut actives[block.clone()],
                         &mut records[block],
@@ -436,11 +451,12 @@ impl<'a> PairPass<'a> {
         record: &mut PairContact,
         sums: &mut PairSums,
     ) {
-        let Some((geometry, hint)) = polygons.results.lane(lane) else {
+        let (block, lane) = (lane / BLOCK, lane % BLOCK);
+        let Some((geometry, hint)) = polygons.results[block].lane(lane) else {
             self.one_pair_left_by_block::<FRICTIONAL>(p, None, state, active, record, sums);
             return;
         };
-        let forces = &polygons.forces;
+        let forces = &polygons.forces[block];
         let at = |v: &BlockLanes| v.0[lane];
         if !SecantLaw::in_domain(at(&forces.denominator), at(&forces.floor)) {
             let computed = Some((geometry, hint));
@@ -456,7 +472,7 @@ impl<'a> PairPass<'a> {
             relative_velocity: pair(&forces.relative_velocity),
             effective_mass: at(&forces.effective_mass),
         };
-        let branch = pair(&polygons.input.branch);
+        let branch = pair(&polygons.input[block].branch);
         self.record::<FRICTIONAL>(Some(touch), hint, branch, state, active, record, sums);
     }
 
@@ -642,22 +658,25 @@ impl<'a> PairPass<'a> {
 /// lanes.
 const POLYGON_WINDOW: usize = 16;
 
-/// Contacts of polygon pairs computed ahead, a block of [`BLOCK`] at a time, for the pair pass
-/// to take in pair order: the first pair on the polygons' common path fills a block with the
-/// next such pairs within [`POLYGON_WINDOW`] (each computed exactly as on its own, so the
-/// blocks' make-up changes no bit).
+/// Contacts of polygon pairs computed ahead, a block of [`BLOCK`] at a time (two where the
+/// processor computes two at once, [`wide_blocks_available`]), for the pair pass to take in
+/// pair order: the first pair on the polygons' common path fills the blocks with the next such
+/// pairs within [`POLYGON_WINDOW`] (each computed exactly as on its own, so the blocks' make-up
+/// changes no bit).
 struct PolygonsAhead<'a> {
     table: Option<&'a ContourTable>,
-    /// The block's pairs (chunk indices, increasing) and their results; `taken` of them used.
-    pairs: [usize; BLOCK],
-    /// The block's shapes and hints, kept from block to block (only their filling changes),
-    /// and its pairs' frames.
-    block: [LanePair<'a>; BLOCK],
-    ends: [[&'a Frame; 2]; BLOCK],
-    results: BlockContacts,
-    /// The block's pairs as their normal forces read them, and those forces.
-    input: PolygonPairs,
-    forces: PolygonPairForces,
+    /// The pairs a turn fills: [`BLOCK`] or twice that.
+    width: usize,
+    /// The blocks' pairs (chunk indices, increasing) and their results; `taken` of them used.
+    pairs: [usize; 2 * BLOCK],
+    /// The blocks' shapes and hints, kept from turn to turn (only their filling changes), and
+    /// their pairs' frames.
+    block: [LanePair<'a>; 2 * BLOCK],
+    ends: [[&'a Frame; 2]; 2 * BLOCK],
+    results: [BlockContacts; 2],
+    /// The blocks' pairs as their normal forces read them, and those forces.
+    input: [PolygonPairs; 2],
+    forces: [PolygonPairForces; 2],
     filled: usize,
     taken: usize,
 }
@@ -673,18 +692,20 @@ impl<'a> PolygonsAhead<'a> {
                 }
                 _ => None,
             },
-            pairs: [0; BLOCK],
-            block: [LanePair::default(); BLOCK],
-            ends: [[&SPARE_FRAME; 2]; BLOCK],
-            results: BlockContacts::default(),
-            input: PolygonPairs::default(),
-            forces: PolygonPairForces::default(),
+            width: polygon_width(),
+            pairs: [0; 2 * BLOCK],
+            block: [LanePair::default(); 2 * BLOCK],
+            ends: [[&SPARE_FRAME; 2]; 2 * BLOCK],
+            results: [BlockContacts::default(); 2],
+            input: [PolygonPairs::default(); 2],
+            forces: [PolygonPairForces::default(); 2],
             filled: 0,
             taken: 0,
         }
     }
 
-    /// The lane of the last block that holds the chunk's pair `k`, if one does.
+    /// The lane of the last blocks that holds the chunk's pair `k`, if one does: block
+    /// `lane / BLOCK`, its lane `lane % BLOCK`.
     #[inline(always)]
     fn computed(&mut self, k: usize) -> Option<usize> {
         if self.taken < self.filled && self.pairs[self.taken] == k {
@@ -694,27 +715,32 @@ impl<'a> PolygonsAhead<'a> {
         None
     }
 
-    /// Whether the last block holds the chunk's pairs `k..k + BLOCK`, each one's contact from
-    /// the common path and its law in its domain: what [`record_block`](Self::record_block)
-    /// writes.
+    /// Whether `lane` is the first of a block that holds the chunk's pairs `k..k + BLOCK`,
+    /// each one's contact from the common path and its law in its domain: what
+    /// [`record_block`](Self::record_block) writes.
     #[inline(always)]
-    fn holds_contacts_from(&self, k: usize) -> bool {
-        let forces = &self.forces;
-        // The block's pairs increase from its first.
-        self.filled == BLOCK
-            && self.pairs[0] == k
-            && self.pairs[BLOCK - 1] == k + BLOCK - 1
-            && self.results.all_on_path()
+    fn holds_block_from(&self, lane: usize, k: usize) -> bool {
+        if !lane.is_multiple_of(BLOCK) || self.filled < lane + BLOCK {
+            return false;
+        }
+        let block = lane / BLOCK;
+        let forces = &self.forces[block];
+        // The blocks' pairs increase from their first.
+        self.pairs[lane] == k
+            && self.pairs[lane + BLOCK - 1] == k + BLOCK - 1
+            && self.results[block].all_on_path()
             && (0..BLOCK).all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
     }
 
-    /// Writes the states, flags and records of the block's pairs, where
-    /// [`holds_contacts_from`](Self::holds_contacts_from) says that they are its contacts, as
+    /// Writes the states, flags and records of the pairs of the block from `lane`, where
+    /// [`holds_block_from`](Self::holds_block_from) says that they are its contacts, as
     /// [`PairPass::record`] writes each one's without friction: the contact with its normal
-    /// force, no tangential force, and the hint and length in the state. Takes every lane.
+    /// force, no tangential force, and the hint and length in the state. Takes every lane of
+    /// the block.
     #[inline(always)]
     fn record_block(
         &mut self,
+        lane: usize,
         states: &mut [PairState],
         actives: &mut [bool],
         records: &mut [PairContact],
@@ -730,12 +756,13 @@ impl<'a> PolygonsAhead<'a> {
         );
         // SAFETY: blocks are computed only where the processor has AVX (`table` is set only
         // there: `new`).
+        let block = lane / BLOCK;
         #[cfg(target_arch = "x86_64")]
         unsafe {
-            self.write_records_avx(records)
+            self.write_records_avx(block, records)
         };
-        let (_, _, length, _) = self.results.contact_lanes();
-        let (_, _, hints) = self.results.cap_and_hint_lanes();
+        let (_, _, length, _) = self.results[block].contact_lanes();
+        let (_, _, hints) = self.results[block].cap_and_hint_lanes();
         for l in 0..BLOCK {
             states[l] = PairState {
                 hint: hints[l],
@@ -744,18 +771,18 @@ impl<'a> PolygonsAhead<'a> {
             };
             actives[l] = true;
         }
-        self.taken = BLOCK;
+        self.taken = lane + BLOCK;
     }
 
     /// The records of [`record_block`](Self::record_block): the lanes' fields as rows of
     /// four words, transposed into the records' two halves.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn write_records_avx(&self, records: &mut [PairContact; BLOCK]) {
+    fn write_records_avx(&self, block: usize, records: &mut [PairContact; BLOCK]) {
         use crate::lanes::avx::transpose;
         use std::arch::x86_64::*;
-        let (point, normal, _, _) = self.results.contact_lanes();
-        let (cap_area_i, cap_area_j, _) = self.results.cap_and_hint_lanes();
+        let (point, normal, _, _) = self.results[block].contact_lanes();
+        let (cap_area_i, cap_area_j, _) = self.results[block].cap_and_hint_lanes();
         // SAFETY: every load reads four initialised f64s, and every store writes the first or
         // second half of a record: eight f64s, 64-byte aligned, in the order asserted
         // beside `PairContact`.
@@ -765,7 +792,7 @@ impl<'a> PolygonsAhead<'a> {
             let heads = transpose([
                 load(&normal[0]),
                 load(&normal[1]),
-                load(&self.forces.force.0),
+                load(&self.forces[block].force.0),
                 tangential_force,
             ]);
             let tails = transpose([
@@ -782,8 +809,8 @@ impl<'a> PolygonsAhead<'a> {
         }
     }
 
-    /// The lane that holds the chunk's pair `k` (not in the last block), after computing a
-    /// block from `k` on where `k` is on the common path; `None` leaves the pair to the
+    /// The lane that holds the chunk's pair `k` (not in the last blocks), after computing
+    /// blocks from `k` on where `k` is on the common path; `None` leaves the pair to the
     /// one-pair path.
     #[inline(always)]
     fn take(
@@ -811,33 +838,59 @@ impl<'a> PolygonsAhead<'a> {
                 block[filled] = pass.lane_pair(p, ends[filled], hint);
                 self.pairs[filled] = ahead;
                 filled += 1;
-                if filled == BLOCK {
+                if filled == self.width {
                     break;
                 }
             }
         }
         // Spare lanes repeat the first pair; their results are not used.
-        for lane in filled..BLOCK {
+        for lane in filled..self.width {
             block[lane] = block[0];
             ends[lane] = ends[0];
         }
-        grain_grain_block(table, block, pass.periodic.is_some(), &mut self.results);
-        // SAFETY: a block is computed only where the processor has AVX (`table` is set only
-        // there: `new`).
-        #[cfg(target_arch = "x86_64")]
-        unsafe {
-            self.input.set_pairs_avx(pass, block, ends);
-            polygon_pair_forces_avx(
-                &self.results,
-                &self.input,
-                &pass.params.law,
-                pass.params.contact_damping,
-                &mut self.forces,
-            );
+        let shifted = pass.periodic.is_some();
+        grain_grain_blocks(table, block, shifted, filled, &mut self.results);
+        for b in 0..filled.div_ceil(BLOCK) {
+            let lanes = b * BLOCK..(b + 1) * BLOCK;
+            let block = block[lanes.clone()].try_into().expect("a block");
+            let ends = ends[lanes].try_into().expect("a block's frames");
+            // SAFETY: a block is computed only where the processor has AVX (`table` is set
+            // only there: `new`).
+            #[cfg(target_arch = "x86_64")]
+            unsafe {
+                self.input[b].set_pairs_avx(pass, block, ends);
+                polygon_pair_forces_avx(
+                    &self.results[b],
+                    &self.input[b],
+                    &pass.params.law,
+                    pass.params.contact_damping,
+                    &mut self.forces[b],
+                );
+            }
         }
         self.filled = filled;
         self.taken = 1;
         Some(0)
+    }
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Set by a test to run the pass with blocks of four where the processor computes eight.
+    static FOUR_LANES_ONLY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// The polygon pairs [`PolygonsAhead`] fills a turn: two blocks where the processor computes
+/// them at once.
+fn polygon_width() -> usize {
+    #[cfg(test)]
+    if FOUR_LANES_ONLY.get() {
+        return BLOCK;
+    }
+    if wide_blocks_available() {
+        2 * BLOCK
+    } else {
+        BLOCK
     }
 }
 
@@ -1842,10 +1895,21 @@ mod tests {
         // same, bit for bit, with and without friction, in a periodic cell (the second grain
         // met at an image) and out of one, and with the law out of its domain for some of the
         // pairs (capped, or the exit reported) while the others' forces come from the lanes.
-        // The hints come from a first pass over the pairs a step before, as in a run.
+        // The hints come from a first pass over the pairs a step before, as in a run. With
+        // one block a turn and, where the processor computes two at once, with two.
         if !block_available() {
             return;
         }
+        for four_lanes_only in [true, false] {
+            FOUR_LANES_ONLY.set(four_lanes_only);
+            polygon_pairs_in_blocks();
+        }
+        FOUR_LANES_ONLY.set(false);
+    }
+
+    /// [`polygon_pairs_in_blocks_give_the_one_pair_paths_bits`] with the blocks a turn
+    /// `FOUR_LANES_ONLY` leaves.
+    fn polygon_pairs_in_blocks() {
         let contours = Contours::new(1.0);
         for (seed, friction, periodic, floor, cap) in [
             (1, false, false, None, false),
