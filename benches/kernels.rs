@@ -382,17 +382,16 @@ mod disc_pairs {
     }
 }
 
-/// The polygon contact's common path four pairs at a time (`grain_grain_block`, AVX) and eight
-/// (`grain_grain_blocks`: AVX-512 where the processor has it, else two blocks of four) against
-/// the one-pair path four times, on four pairs at depths 0.01 to 0.15 of a diameter whose j
-/// moves back and forth by a tenth of a node spacing along the line of centres from call to
-/// call (a contact under load from step to step; a dense step moves a grain by far less). Each
-/// call takes the hints the last left; without AVX the block leaves every pair to the one-pair
-/// path, called here as the pair pass does.
+/// The polygon contact's common path eight pairs at a time (`grain_grain_blocks`, by each
+/// kernel the processor runs: pairs of AVX registers, AVX-512) against the one-pair path four
+/// times, on four pairs (twice over in the eight lanes) at depths 0.01 to 0.15 of a diameter
+/// whose j moves back and forth by a tenth of a node spacing along the line of centres from
+/// call to call (a contact under load from step to step; a dense step moves a grain by far
+/// less). Each call takes the hints the last left.
 mod polygon_lanes {
     use super::pair;
     use sdem::geometry::intersection_lanes::{
-        BLOCK, BlockContacts, LanePair, OwnedLaneShape, grain_grain_block, grain_grain_blocks,
+        BLOCK, BlockContacts, BlockKernel, LanePair, OwnedLaneShape, PAIRS, grain_grain_blocks,
     };
     use sdem::geometry::{ContourTable, GrainShape, PairHint, grain_grain_hinted};
     use std::hint::black_box;
@@ -412,52 +411,18 @@ mod polygon_lanes {
         (pairs, hints)
     }
 
-    #[divan::bench]
-    fn four_in_lanes(bencher: divan::Bencher) {
-        let table = ContourTable::new(1.0);
-        let (pairs, mut hints) = moving_pairs(&table);
-        let shapes =
-            pairs.map(|at| at.map(|(i, j)| [OwnedLaneShape::of(&i), OwnedLaneShape::of(&j)]));
-        let mut contacts = BlockContacts::default();
-        let mut call = 0usize;
-        let mut on_path = 0;
-        bencher
-            .counter(divan::counter::ItemsCount::new(BLOCK))
-            .bench_local(|| {
-                call += 1;
-                let block: [LanePair; BLOCK] = std::array::from_fn(|l| {
-                    let [i, j] = &shapes[l][call & 1];
-                    LanePair {
-                        i: i.lane_shape(),
-                        j: j.lane_shape(),
-                        hint: hints[l],
-                        ..Default::default()
-                    }
-                });
-                grain_grain_block(&table, black_box(&block), false, &mut contacts);
-                for (l, hint) in hints.iter_mut().enumerate() {
-                    match contacts.lane(l) {
-                        Some((_, next)) => {
-                            *hint = next;
-                            on_path += 1;
-                        }
-                        None => {
-                            let (i, j) = &pairs[l][call & 1];
-                            grain_grain_hinted(&table, i, j, hint);
-                        }
-                    }
-                }
-                black_box(&contacts);
-            });
-        // What the bench means to time: where the processor has AVX, every lane on the path.
-        if sdem::geometry::intersection_lanes::block_available() {
-            assert_eq!(on_path, BLOCK * call, "lanes left the path");
-        }
+    /// The kernels by name (`divan`'s arguments are values it can print).
+    fn kernel(name: &str) -> Option<BlockKernel> {
+        BlockKernel::available()
+            .into_iter()
+            .find(|k| k.name() == name)
     }
 
-    /// The same four pairs twice over, eight lanes a call.
-    #[divan::bench]
-    fn eight_in_lanes(bencher: divan::Bencher) {
+    #[divan::bench(args = ["two AVX registers", "AVX-512"])]
+    fn eight_in_lanes(bencher: divan::Bencher, name: &str) {
+        let Some(kernel) = kernel(name) else {
+            return;
+        };
         let table = ContourTable::new(1.0);
         let (pairs, four_hints) = moving_pairs(&table);
         let mut hints = [four_hints, four_hints].concat();
@@ -467,10 +432,10 @@ mod polygon_lanes {
         let mut call = 0usize;
         let mut on_path = 0;
         bencher
-            .counter(divan::counter::ItemsCount::new(2 * BLOCK))
+            .counter(divan::counter::ItemsCount::new(PAIRS))
             .bench_local(|| {
                 call += 1;
-                let block: [LanePair; 2 * BLOCK] = std::array::from_fn(|l| {
+                let block: [LanePair; PAIRS] = std::array::from_fn(|l| {
                     let [i, j] = &shapes[l % BLOCK][call & 1];
                     LanePair {
                         i: i.lane_shape(),
@@ -479,7 +444,7 @@ mod polygon_lanes {
                         ..Default::default()
                     }
                 });
-                grain_grain_blocks(&table, black_box(&block), false, 2 * BLOCK, &mut contacts);
+                grain_grain_blocks(kernel, &table, black_box(&block), false, &mut contacts);
                 for (l, hint) in hints.iter_mut().enumerate() {
                     match contacts[l / BLOCK].lane(l % BLOCK) {
                         Some((_, next)) => {
@@ -494,9 +459,8 @@ mod polygon_lanes {
                 }
                 black_box(&contacts);
             });
-        if sdem::geometry::intersection_lanes::block_available() {
-            assert_eq!(on_path, 2 * BLOCK * call, "lanes left the path");
-        }
+        // What the bench means to time: every lane on the path.
+        assert_eq!(on_path, PAIRS * call, "lanes left the path");
     }
 
     #[divan::bench]

@@ -23,7 +23,7 @@ use glam::DVec2;
 #[cfg(doc)]
 use super::intersection::grain_grain_hinted;
 
-/// Pairs in a block of [`grain_grain_block`]: one AVX register's worth.
+/// Pairs in a block: one AVX register's worth of lanes, the unit of [`BlockContacts`].
 pub const BLOCK: usize = 4;
 
 /// One grain of a pair as a block reads it, where it lies: its centre and bounding radius,
@@ -154,71 +154,83 @@ impl BlockContacts {
     }
 }
 
-/// Whether this processor runs [`grain_grain_block`]'s lanes (else every lane is `None`).
+/// Pairs a call of [`grain_grain_blocks`] computes: two blocks.
+pub const PAIRS: usize = 2 * BLOCK;
+
+/// How [`grain_grain_blocks`] computes its eight lanes: in pairs of AVX registers, or in
+/// AVX-512 ones. Made only by [`available`](Self::available) and [`best`](Self::best), so that
+/// a kernel in hand runs on this processor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BlockKernel(Width);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Width {
+    TwoAvx,
+    Avx512,
+}
+
+impl BlockKernel {
+    /// The kernels this processor runs, the fastest last; none without AVX.
+    pub fn available() -> Vec<BlockKernel> {
+        let mut kernels = Vec::new();
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx") {
+                kernels.push(BlockKernel(Width::TwoAvx));
+            }
+            if avx512::available() {
+                kernels.push(BlockKernel(Width::Avx512));
+            }
+        }
+        kernels
+    }
+
+    /// The fastest kernel this processor runs, `None` without AVX.
+    pub fn best() -> Option<BlockKernel> {
+        static BEST: std::sync::OnceLock<Option<BlockKernel>> = std::sync::OnceLock::new();
+        *BEST.get_or_init(|| Self::available().pop())
+    }
+
+    /// The kernel's name, as benches and notes give it.
+    pub fn name(self) -> &'static str {
+        match self.0 {
+            Width::TwoAvx => "two AVX registers",
+            Width::Avx512 => "AVX-512",
+        }
+    }
+}
+
+/// Whether this processor runs [`grain_grain_blocks`]' lanes (else every pair takes the one-pair
+/// path).
 pub fn block_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        return true;
-    }
-    false
+    BlockKernel::best().is_some()
 }
 
-/// The contacts of [`BLOCK`] pairs on the common path (see the module's docs), written to
-/// `contacts`: each lane's [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for
-/// that pair (always a contact there) and the hint it leaves; `None` where the pair leaves the
-/// path, or every lane without AVX. Neither grain of a pair is a circle ([`LaneShape`]);
-/// `shifted`: j's centres are moved by the pairs' `j_shift` (a periodic cell's images). Out of
-/// line, so that the lanes stay in vector registers.
-#[inline(never)]
-pub fn grain_grain_block(
-    table: &ContourTable,
-    pairs: &[LanePair<'_>; BLOCK],
-    shifted: bool,
-    contacts: &mut BlockContacts,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX (tested just above).
-        unsafe { avx::grain_grain_block(table, pairs, shifted, contacts) };
-        return;
-    }
-    let _ = (table, pairs, shifted);
-    contacts.on_path = 0;
-}
-
-/// Whether this processor runs [`grain_grain_blocks`]' eight lanes at once (AVX-512), where
-/// two blocks cost about what one does: a caller fills two blocks then.
-pub fn wide_blocks_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if avx512::available() {
-        return true;
-    }
-    false
-}
-
-/// [`grain_grain_block`] of two blocks, `pairs[..BLOCK]` to `contacts[0]` and the rest to
-/// `contacts[1]`: in the eight lanes of AVX-512 registers where the processor has them
-/// ([`wide_blocks_available`]), else block by block, the second only where `filled`, the
-/// pairs that count, exceeds [`BLOCK`]. Each lane's result is the same either way.
+/// The contacts of two blocks of [`BLOCK`] pairs on the common path (see the module's docs),
+/// `pairs[..BLOCK]` to `contacts[0]` and the rest to `contacts[1]`, by `kernel`: each lane's
+/// [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for that pair (always a
+/// contact there) and the hint it leaves, whichever the kernel; `None` where the pair leaves
+/// the path. Neither grain of a pair is a circle ([`LaneShape`]); `shifted`: j's centres are
+/// moved by the pairs' `j_shift` (a periodic cell's images). Out of line, so that the lanes
+/// stay in vector registers.
 #[inline(never)]
 pub fn grain_grain_blocks(
+    kernel: BlockKernel,
     table: &ContourTable,
-    pairs: &[LanePair<'_>; 2 * BLOCK],
+    pairs: &[LanePair<'_>; PAIRS],
     shifted: bool,
-    filled: usize,
     contacts: &mut [BlockContacts; 2],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if avx512::available() {
-        // SAFETY: the processor has AVX-512F and AVX-512VL (tested just above).
-        unsafe { avx512::grain_grain_blocks(table, pairs, shifted, contacts) };
-        return;
+    match kernel.0 {
+        // SAFETY: a kernel is made only where the processor runs it (`BlockKernel::available`).
+        Width::TwoAvx => unsafe { avx_pair::grain_grain_blocks(table, pairs, shifted, contacts) },
+        Width::Avx512 => unsafe { avx512::grain_grain_blocks(table, pairs, shifted, contacts) },
     }
-    let [first, second] = contacts;
-    let (low, high) = pairs.split_at(BLOCK);
-    grain_grain_block(table, low.try_into().expect("a block"), shifted, first);
-    if filled > BLOCK {
-        grain_grain_block(table, high.try_into().expect("a block"), shifted, second);
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = (kernel, table, pairs, shifted);
+        unreachable!("no block kernel is made on this processor");
     }
 }
 
@@ -230,6 +242,9 @@ mod avx;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+
+#[cfg(target_arch = "x86_64")]
+mod avx_pair;
 
 #[cfg(test)]
 mod tests {
@@ -281,8 +296,9 @@ mod tests {
     #[test]
     fn lanes_give_the_one_pair_paths_contact_and_hint_bit_for_bit() {
         // Expectation: a lane on the common path returns exactly what `grain_grain_hinted`
-        // returns for its pair from the same hint (contact and next hint), whatever the lane and
-        // the pairs beside it; and most pairs a step after a contact take that path.
+        // returns for its pair from the same hint (contact and next hint), whatever the lane,
+        // the pairs beside it and the kernel (AVX-512 or pairs of AVX registers, each where
+        // the processor runs it); and most pairs a step after a contact take that path.
         if !block_available() {
             return;
         }
@@ -300,9 +316,9 @@ mod tests {
                     pairs.push((shapes, hint, i_next, j_next));
                 }
             }
-            for (block, rotation) in pairs.chunks_exact(2 * BLOCK).zip(0..) {
-                let mut block: [_; 2 * BLOCK] = block.try_into().unwrap();
-                block.rotate_left(rotation % (2 * BLOCK));
+            for (block, rotation) in pairs.chunks_exact(PAIRS).zip(0..) {
+                let mut block: [_; PAIRS] = block.try_into().unwrap();
+                block.rotate_left(rotation % PAIRS);
                 // Every other block meets j at an image: j's shape is stored moved back by the
                 // lane's shift, which the block adds (and the one-pair path sees j where the
                 // shift brings it back).
@@ -315,7 +331,7 @@ mod tests {
                         j.center_and_radius[1] -= shift(l).y;
                     }
                 }
-                let mut lanes = [LanePair::default(); 2 * BLOCK];
+                let mut lanes = [LanePair::default(); PAIRS];
                 for (l, lane) in lanes.iter_mut().enumerate() {
                     *lane = LanePair {
                         i: stored[l][0].lane_shape(),
@@ -324,14 +340,16 @@ mod tests {
                         hint: block[l].1,
                     };
                 }
-                // Block by block (four lanes), and both blocks at once (eight lanes where the
-                // processor has AVX-512): the same contacts.
-                let mut contacts = [BlockContacts::default(); 2];
-                for (half, out) in lanes.chunks_exact(BLOCK).zip(&mut contacts) {
-                    grain_grain_block(&table, half.try_into().unwrap(), shifted, out);
-                }
-                let mut wide = [BlockContacts::default(); 2];
-                grain_grain_blocks(&table, &lanes, shifted, 2 * BLOCK, &mut wide);
+                // Every kernel this processor runs: the same contacts, bit for bit.
+                let kernels = BlockKernel::available();
+                let results: Vec<[BlockContacts; 2]> = (kernels.iter())
+                    .map(|&kernel| {
+                        let mut contacts = [BlockContacts::default(); 2];
+                        grain_grain_blocks(kernel, &table, &lanes, shifted, &mut contacts);
+                        contacts
+                    })
+                    .collect();
+                let contacts = results[0];
                 for (l, (_, start_hint, i, j)) in block.iter().enumerate() {
                     let mut j = *j;
                     if shifted {
@@ -343,11 +361,14 @@ mod tests {
                     total += 1;
                     let lane = contacts[l / BLOCK].lane(l % BLOCK);
                     // Bit for bit: `{:?}` writes each f64 exactly, and the sign of a zero.
-                    assert_eq!(
-                        format!("{:?}", wide[l / BLOCK].lane(l % BLOCK)),
-                        format!("{lane:?}"),
-                        "lane {l} of eight"
-                    );
+                    for (kernel, other) in kernels.iter().zip(&results) {
+                        assert_eq!(
+                            format!("{:?}", other[l / BLOCK].lane(l % BLOCK)),
+                            format!("{lane:?}"),
+                            "lane {l}, {}",
+                            kernel.name()
+                        );
+                    }
                     if let Some((contact, next_hint)) = lane {
                         assert_eq!(one, Overlap::Contact(contact), "lane {l}");
                         assert_eq!(hint, next_hint, "lane {l}");

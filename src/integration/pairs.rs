@@ -10,11 +10,10 @@
 //! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
 //! computed again by the one-pair path, which handles those cases.
 //!
-//! Pairs of contour polygons that were in contact last step go four at a time through the
-//! common path of their contact in AVX lanes, eight at a time in AVX-512 ones where the
-//! processor has them ([`grain_grain_blocks`]): the pass fills one block (or two) with the next
-//! such pairs within `POLYGON_WINDOW` and takes their results in pair order
-//! (`PolygonsAhead`). The same lanes then give the block's normal forces (the law, the
+//! Pairs of contour polygons that were in contact last step go eight at a time through the
+//! common path of their contact in vector lanes ([`grain_grain_blocks`], two blocks of four):
+//! the pass fills the blocks with the next such pairs within `POLYGON_WINDOW` and takes their
+//! results in pair order (`PolygonsAhead`). The same lanes then give the block's normal forces (the law, the
 //! relative velocity at the contact point and the dashpot: `polygon_pair_forces`). A lane gives
 //! the one-pair path's bits or leaves the pair to it (a lane whose law left its domain leaves
 //! from its contact), so the blocks' make-up (which changes with the chunks, and so with the
@@ -34,8 +33,7 @@ use crate::geometry::circle::{
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
-    BLOCK, BlockContacts, LaneContact, LanePair, block_available, grain_grain_blocks,
-    wide_blocks_available,
+    BLOCK, BlockContacts, BlockKernel, LaneContact, LanePair, PAIRS, grain_grain_blocks,
 };
 use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -658,21 +656,19 @@ impl<'a> PairPass<'a> {
 /// lanes.
 const POLYGON_WINDOW: usize = 16;
 
-/// Contacts of polygon pairs computed ahead, a block of [`BLOCK`] at a time (two where the
-/// processor computes two at once, [`wide_blocks_available`]), for the pair pass to take in
-/// pair order: the first pair on the polygons' common path fills the blocks with the next such
-/// pairs within [`POLYGON_WINDOW`] (each computed exactly as on its own, so the blocks' make-up
-/// changes no bit).
+/// Contacts of polygon pairs computed ahead, two blocks of [`BLOCK`] at a time, for the pair
+/// pass to take in pair order: the first pair on the polygons' common path fills the blocks
+/// with the next such pairs within [`POLYGON_WINDOW`] (each computed exactly as on its own, so
+/// the blocks' make-up changes no bit).
 struct PolygonsAhead<'a> {
-    table: Option<&'a ContourTable>,
-    /// The pairs a turn fills: [`BLOCK`] or twice that.
-    width: usize,
+    /// The table and the kernel, where the processor runs one and some frame is not a circle.
+    table: Option<(&'a ContourTable, BlockKernel)>,
     /// The blocks' pairs (chunk indices, increasing) and their results; `taken` of them used.
-    pairs: [usize; 2 * BLOCK],
+    pairs: [usize; PAIRS],
     /// The blocks' shapes and hints, kept from turn to turn (only their filling changes), and
     /// their pairs' frames.
-    block: [LanePair<'a>; 2 * BLOCK],
-    ends: [[&'a Frame; 2]; 2 * BLOCK],
+    block: [LanePair<'a>; PAIRS],
+    ends: [[&'a Frame; 2]; PAIRS],
     results: [BlockContacts; 2],
     /// The blocks' pairs as their normal forces read them, and those forces.
     input: [PolygonPairs; 2],
@@ -686,16 +682,15 @@ impl<'a> PolygonsAhead<'a> {
     /// circle.
     fn new(contours: &'a Contours, every_frame_a_circle: bool) -> Self {
         Self {
-            table: match contours {
-                Contours::Polygon(table) if !every_frame_a_circle && block_available() => {
-                    Some(table)
+            table: match (contours, block_kernel()) {
+                (Contours::Polygon(table), Some(kernel)) if !every_frame_a_circle => {
+                    Some((table, kernel))
                 }
                 _ => None,
             },
-            width: polygon_width(),
-            pairs: [0; 2 * BLOCK],
-            block: [LanePair::default(); 2 * BLOCK],
-            ends: [[&SPARE_FRAME; 2]; 2 * BLOCK],
+            pairs: [0; PAIRS],
+            block: [LanePair::default(); PAIRS],
+            ends: [[&SPARE_FRAME; 2]; PAIRS],
             results: [BlockContacts::default(); 2],
             input: [PolygonPairs::default(); 2],
             forces: [PolygonPairForces::default(); 2],
@@ -820,7 +815,7 @@ impl<'a> PolygonsAhead<'a> {
         first_pair: usize,
         states: &[PairState],
     ) -> Option<usize> {
-        let table = self.table?;
+        let (table, kernel) = self.table?;
         if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
             return None;
         }
@@ -838,18 +833,18 @@ impl<'a> PolygonsAhead<'a> {
                 block[filled] = pass.lane_pair(p, ends[filled], hint);
                 self.pairs[filled] = ahead;
                 filled += 1;
-                if filled == self.width {
+                if filled == PAIRS {
                     break;
                 }
             }
         }
         // Spare lanes repeat the first pair; their results are not used.
-        for lane in filled..self.width {
+        for lane in filled..PAIRS {
             block[lane] = block[0];
             ends[lane] = ends[0];
         }
         let shifted = pass.periodic.is_some();
-        grain_grain_blocks(table, block, shifted, filled, &mut self.results);
+        grain_grain_blocks(kernel, table, block, shifted, &mut self.results);
         for b in 0..filled.div_ceil(BLOCK) {
             let lanes = b * BLOCK..(b + 1) * BLOCK;
             let block = block[lanes.clone()].try_into().expect("a block");
@@ -876,22 +871,18 @@ impl<'a> PolygonsAhead<'a> {
 
 #[cfg(test)]
 thread_local! {
-    /// Set by a test to run the pass with blocks of four where the processor computes eight.
-    static FOUR_LANES_ONLY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Set by a test to run the pass with another kernel than the processor's fastest.
+    static KERNEL_FOR_TESTS: std::cell::Cell<Option<BlockKernel>> =
+        const { std::cell::Cell::new(None) };
 }
 
-/// The polygon pairs [`PolygonsAhead`] fills a turn: two blocks where the processor computes
-/// them at once.
-fn polygon_width() -> usize {
+/// The kernel of the polygon blocks: the fastest this processor runs, if it runs one.
+fn block_kernel() -> Option<BlockKernel> {
     #[cfg(test)]
-    if FOUR_LANES_ONLY.get() {
-        return BLOCK;
+    if let Some(kernel) = KERNEL_FOR_TESTS.get() {
+        return Some(kernel);
     }
-    if wide_blocks_available() {
-        2 * BLOCK
-    } else {
-        BLOCK
-    }
+    BlockKernel::best()
 }
 
 /// What a polygon block's lanes hold before it is first filled.
@@ -1896,19 +1887,16 @@ mod tests {
         // met at an image) and out of one, and with the law out of its domain for some of the
         // pairs (capped, or the exit reported) while the others' forces come from the lanes.
         // The hints come from a first pass over the pairs a step before, as in a run. With
-        // one block a turn and, where the processor computes two at once, with two.
-        if !block_available() {
-            return;
-        }
-        for four_lanes_only in [true, false] {
-            FOUR_LANES_ONLY.set(four_lanes_only);
+        // every kernel this processor runs.
+        for kernel in BlockKernel::available() {
+            KERNEL_FOR_TESTS.set(Some(kernel));
             polygon_pairs_in_blocks();
         }
-        FOUR_LANES_ONLY.set(false);
+        KERNEL_FOR_TESTS.set(None);
     }
 
-    /// [`polygon_pairs_in_blocks_give_the_one_pair_paths_bits`] with the blocks a turn
-    /// `FOUR_LANES_ONLY` leaves.
+    /// [`polygon_pairs_in_blocks_give_the_one_pair_paths_bits`] with the kernel
+    /// `KERNEL_FOR_TESTS` sets.
     fn polygon_pairs_in_blocks() {
         let contours = Contours::new(1.0);
         for (seed, friction, periodic, floor, cap) in [

@@ -1,6 +1,6 @@
 //! Four lanes of the kernel in AVX registers: `f64`s in `__m256d`, node indices in `__m128i`
 //! (SSE4.1, which AVX implies), lanes' selections as `movemask` bits and blend masks loaded
-//! from a table.
+//! from a table. The half of [`super::avx_pair`]'s eight lanes.
 
 use super::kernel::{Bits, V2, Wide};
 use super::{BLOCK, BlockContacts, LanePair};
@@ -317,21 +317,5 @@ unsafe impl Wide for Avx {
     #[inline(always)]
     unsafe fn store_hints(rows: [__m128i; 4], out: &mut [BlockContacts]) {
         unsafe { store_hints4(rows, out.get_unchecked_mut(0)) }
-    }
-}
-
-/// [`super::grain_grain_block`] on a processor with AVX.
-///
-/// # Safety
-/// The processor has AVX.
-#[target_feature(enable = "avx")]
-pub(super) unsafe fn grain_grain_block(
-    table: &crate::geometry::contour::ContourTable,
-    pairs: &[LanePair<'_>; BLOCK],
-    shifted: bool,
-    out: &mut BlockContacts,
-) {
-    unsafe {
-        super::kernel::grain_grain_lanes::<Avx>(table, pairs, shifted, std::slice::from_mut(out))
     }
 }

@@ -1,7 +1,7 @@
 //! The common path's arithmetic, written once over [`Wide`]: lanes of `f64`s and of node
-//! indices, four in AVX registers ([`super::avx`]) or eight in AVX-512 ones
-//! ([`super::avx512`]). Every lane computes with the operations of the one-pair path, in its
-//! order, whichever the width: the widths give the same bits.
+//! indices, eight in pairs of AVX registers ([`super::avx_pair`], over [`super::avx`]'s four)
+//! or in AVX-512 ones ([`super::avx512`]). Every lane computes with the operations of the
+//! one-pair path, in its order, whichever the registers: the kernels give the same bits.
 
 use super::{BLOCK, BlockContacts, LanePair};
 use crate::geometry::contour::ContourTable;
@@ -530,7 +530,7 @@ unsafe fn shapes<W: Wide>(pairs: &[LanePair<'_>], second: bool) -> (V2<W>, M2<W>
     }
 }
 
-/// The kernel of [`super::grain_grain_block`] over `W`'s lanes: the pairs `pairs[..LANES]`,
+/// The kernel of [`super::grain_grain_blocks`] over `W`'s lanes: the pairs `pairs[..LANES]`,
 /// their contacts written to `out[..LANES / BLOCK]`, block `b` holding lanes `4b..4b + 4`.
 ///
 /// # Safety
