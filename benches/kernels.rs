@@ -444,7 +444,14 @@ mod polygon_lanes {
                         ..Default::default()
                     }
                 });
-                grain_grain_blocks(kernel, &table, black_box(&block), false, &mut contacts);
+                grain_grain_blocks(
+                    kernel,
+                    &table,
+                    black_box(&block),
+                    false,
+                    PAIRS,
+                    &mut contacts,
+                );
                 for (l, hint) in hints.iter_mut().enumerate() {
                     match contacts[l / BLOCK].lane(l % BLOCK) {
                         Some((_, next)) => {

@@ -207,7 +207,9 @@ pub fn block_available() -> bool {
 }
 
 /// The contacts of two blocks of [`BLOCK`] pairs on the common path (see the module's docs),
-/// `pairs[..BLOCK]` to `contacts[0]` and the rest to `contacts[1]`, by `kernel`: each lane's
+/// `pairs[..BLOCK]` to `contacts[0]` and the rest to `contacts[1]`, by `kernel`, of which the
+/// first `filled` count (the second block may be left unwritten where they fit in the first):
+/// each lane's
 /// [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for that pair (always a
 /// contact there) and the hint it leaves, whichever the kernel; `None` where the pair leaves
 /// the path. Neither grain of a pair is a circle ([`LaneShape`]); `shifted`: j's centres are
@@ -219,17 +221,20 @@ pub fn grain_grain_blocks(
     table: &ContourTable,
     pairs: &[LanePair<'_>; PAIRS],
     shifted: bool,
+    filled: usize,
     contacts: &mut [BlockContacts; 2],
 ) {
     #[cfg(target_arch = "x86_64")]
     match kernel.0 {
         // SAFETY: a kernel is made only where the processor runs it (`BlockKernel::available`).
-        Width::TwoAvx => unsafe { avx_pair::grain_grain_blocks(table, pairs, shifted, contacts) },
+        Width::TwoAvx => unsafe {
+            avx_pair::grain_grain_blocks(table, pairs, shifted, filled, contacts)
+        },
         Width::Avx512 => unsafe { avx512::grain_grain_blocks(table, pairs, shifted, contacts) },
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        let _ = (kernel, table, pairs, shifted);
+        let _ = (kernel, table, pairs, shifted, filled);
         unreachable!("no block kernel is made on this processor");
     }
 }
@@ -340,16 +345,21 @@ mod tests {
                         hint: block[l].1,
                     };
                 }
-                // Every kernel this processor runs: the same contacts, bit for bit.
+                // Every kernel this processor runs, on both blocks and on the first alone (which
+                // a kernel may compute in fewer lanes): the same contacts, bit for bit.
                 let kernels = BlockKernel::available();
-                let results: Vec<[BlockContacts; 2]> = (kernels.iter())
-                    .map(|&kernel| {
+                let mut results: Vec<(&str, [BlockContacts; 2])> = Vec::new();
+                for &kernel in &kernels {
+                    for filled in [PAIRS, BLOCK] {
                         let mut contacts = [BlockContacts::default(); 2];
-                        grain_grain_blocks(kernel, &table, &lanes, shifted, &mut contacts);
-                        contacts
-                    })
-                    .collect();
-                let contacts = results[0];
+                        grain_grain_blocks(kernel, &table, &lanes, shifted, filled, &mut contacts);
+                        if filled == BLOCK {
+                            contacts[1] = results.last().expect("both blocks first").1[1];
+                        }
+                        results.push((kernel.name(), contacts));
+                    }
+                }
+                let contacts = results[0].1;
                 for (l, (_, start_hint, i, j)) in block.iter().enumerate() {
                     let mut j = *j;
                     if shifted {
@@ -361,12 +371,11 @@ mod tests {
                     total += 1;
                     let lane = contacts[l / BLOCK].lane(l % BLOCK);
                     // Bit for bit: `{:?}` writes each f64 exactly, and the sign of a zero.
-                    for (kernel, other) in kernels.iter().zip(&results) {
+                    for (kernel, other) in &results {
                         assert_eq!(
                             format!("{:?}", other[l / BLOCK].lane(l % BLOCK)),
                             format!("{lane:?}"),
-                            "lane {l}, {}",
-                            kernel.name()
+                            "lane {l}, {kernel}"
                         );
                     }
                     if let Some((contact, next_hint)) = lane {

@@ -844,7 +844,7 @@ impl<'a> PolygonsAhead<'a> {
             ends[lane] = ends[0];
         }
         let shifted = pass.periodic.is_some();
-        grain_grain_blocks(kernel, table, block, shifted, &mut self.results);
+        grain_grain_blocks(kernel, table, block, shifted, filled, &mut self.results);
         for b in 0..filled.div_ceil(BLOCK) {
             let lanes = b * BLOCK..(b + 1) * BLOCK;
             let block = block[lanes.clone()].try_into().expect("a block");

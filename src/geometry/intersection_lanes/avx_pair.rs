@@ -241,7 +241,8 @@ unsafe impl Wide for AvxPair {
     }
 }
 
-/// [`super::grain_grain_blocks`] in pairs of AVX registers.
+/// [`super::grain_grain_blocks`] in pairs of AVX registers; the first block alone, in one
+/// register's lanes, where the pairs that count (`filled`) fit in it.
 ///
 /// # Safety
 /// The processor has AVX.
@@ -250,7 +251,14 @@ pub(super) unsafe fn grain_grain_blocks(
     table: &crate::geometry::contour::ContourTable,
     pairs: &[LanePair<'_>; 2 * BLOCK],
     shifted: bool,
+    filled: usize,
     out: &mut [BlockContacts; 2],
 ) {
-    unsafe { super::kernel::grain_grain_lanes::<AvxPair>(table, pairs, shifted, out) }
+    unsafe {
+        if filled <= BLOCK {
+            super::kernel::grain_grain_lanes::<Avx>(table, &pairs[..BLOCK], shifted, &mut out[..1]);
+        } else {
+            super::kernel::grain_grain_lanes::<AvxPair>(table, pairs, shifted, out);
+        }
+    }
 }
