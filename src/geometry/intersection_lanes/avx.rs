@@ -135,6 +135,26 @@ arithmetic!(Sub, sub, _mm256_sub_pd);
 arithmetic!(Mul, mul, _mm256_mul_pd);
 arithmetic!(Div, div, _mm256_div_pd);
 
+/// A comparison of lanes, as the lanes' bits.
+macro_rules! compare {
+    ($method:ident, $predicate:ident) => {
+        #[inline(always)]
+        unsafe fn $method(self, other: Self) -> Bits {
+            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<$predicate>(self.0, other.0)) as Bits }
+        }
+    };
+}
+
+/// An operation on two index lanes.
+macro_rules! binary_i {
+    ($method:ident, $intrinsic:ident) => {
+        #[inline(always)]
+        unsafe fn $method(a: __m128i, b: __m128i) -> __m128i {
+            unsafe { $intrinsic(a, b) }
+        }
+    };
+}
+
 // SAFETY: every method runs AVX (or SSE4.1) instructions, which the kernels calling them are
 // compiled for.
 unsafe impl Wide for Avx {
@@ -156,26 +176,11 @@ unsafe impl Wide for Avx {
     unsafe fn neg(self) -> Self {
         unsafe { Avx(_mm256_xor_pd(self.0, _mm256_set1_pd(-0.0))) }
     }
-    #[inline(always)]
-    unsafe fn less(self, other: Self) -> Bits {
-        unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(self.0, other.0)) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn greater(self, other: Self) -> Bits {
-        unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(self.0, other.0)) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn at_least(self, other: Self) -> Bits {
-        unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(self.0, other.0)) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn at_most(self, other: Self) -> Bits {
-        unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LE_OQ>(self.0, other.0)) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn not_at_most(self, other: Self) -> Bits {
-        unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_NLE_UQ>(self.0, other.0)) as Bits }
-    }
+    compare!(less, _CMP_LT_OQ);
+    compare!(greater, _CMP_GT_OQ);
+    compare!(at_least, _CMP_GE_OQ);
+    compare!(at_most, _CMP_LE_OQ);
+    compare!(not_at_most, _CMP_NLE_UQ);
     #[inline(always)]
     unsafe fn min(self, other: Self) -> Self {
         unsafe { Avx(_mm256_min_pd(self.0, other.0)) }
@@ -248,22 +253,10 @@ unsafe impl Wide for Avx {
     unsafe fn splat_i(k: i32) -> __m128i {
         unsafe { _mm_set1_epi32(k) }
     }
-    #[inline(always)]
-    unsafe fn add_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_add_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn sub_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_sub_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn greater_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_cmpgt_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn equal_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_cmpeq_epi32(a, b) }
-    }
+    binary_i!(add_i, _mm_add_epi32);
+    binary_i!(sub_i, _mm_sub_epi32);
+    binary_i!(greater_i, _mm_cmpgt_epi32);
+    binary_i!(equal_i, _mm_cmpeq_epi32);
     #[inline(always)]
     unsafe fn bits_i(m: __m128i) -> Bits {
         unsafe { _mm_movemask_ps(_mm_castsi128_ps(m)) as Bits }
@@ -280,26 +273,11 @@ unsafe impl Wide for Avx {
     unsafe fn ones_i(m: Bits) -> __m128i {
         unsafe { _mm_srli_epi32::<31>(mask_i(m)) }
     }
-    #[inline(always)]
-    unsafe fn and_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_and_si128(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max_unsigned_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_max_epu32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min_unsigned_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_min_epu32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_max_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min_i(a: __m128i, b: __m128i) -> __m128i {
-        unsafe { _mm_min_epi32(a, b) }
-    }
+    binary_i!(and_i, _mm_and_si128);
+    binary_i!(max_unsigned_i, _mm_max_epu32);
+    binary_i!(min_unsigned_i, _mm_min_epu32);
+    binary_i!(max_i, _mm_max_epi32);
+    binary_i!(min_i, _mm_min_epi32);
     #[inline(always)]
     unsafe fn half_i(k: __m128i) -> __m128i {
         unsafe { _mm_srai_epi32::<1>(k) }

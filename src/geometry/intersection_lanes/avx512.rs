@@ -73,6 +73,26 @@ fn lanes(b: Bits) -> __mmask8 {
     b as __mmask8
 }
 
+/// A comparison of lanes, as the lanes' bits.
+macro_rules! compare {
+    ($method:ident, $predicate:ident) => {
+        #[inline(always)]
+        unsafe fn $method(self, other: Self) -> Bits {
+            unsafe { _mm512_cmp_pd_mask::<$predicate>(self.0, other.0) as Bits }
+        }
+    };
+}
+
+/// An operation on two index lanes.
+macro_rules! binary_i {
+    ($method:ident, $intrinsic:ident) => {
+        #[inline(always)]
+        unsafe fn $method(a: __m256i, b: __m256i) -> __m256i {
+            unsafe { $intrinsic(a, b) }
+        }
+    };
+}
+
 // SAFETY: every method runs AVX-512F, AVX-512VL or AVX2 instructions, which the kernel calling
 // them is compiled for.
 unsafe impl Wide for Avx512 {
@@ -98,26 +118,11 @@ unsafe impl Wide for Avx512 {
             )))
         }
     }
-    #[inline(always)]
-    unsafe fn less(self, other: Self) -> Bits {
-        unsafe { _mm512_cmp_pd_mask::<_CMP_LT_OQ>(self.0, other.0) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn greater(self, other: Self) -> Bits {
-        unsafe { _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.0, other.0) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn at_least(self, other: Self) -> Bits {
-        unsafe { _mm512_cmp_pd_mask::<_CMP_GE_OQ>(self.0, other.0) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn at_most(self, other: Self) -> Bits {
-        unsafe { _mm512_cmp_pd_mask::<_CMP_LE_OQ>(self.0, other.0) as Bits }
-    }
-    #[inline(always)]
-    unsafe fn not_at_most(self, other: Self) -> Bits {
-        unsafe { _mm512_cmp_pd_mask::<_CMP_NLE_UQ>(self.0, other.0) as Bits }
-    }
+    compare!(less, _CMP_LT_OQ);
+    compare!(greater, _CMP_GT_OQ);
+    compare!(at_least, _CMP_GE_OQ);
+    compare!(at_most, _CMP_LE_OQ);
+    compare!(not_at_most, _CMP_NLE_UQ);
     #[inline(always)]
     unsafe fn min(self, other: Self) -> Self {
         unsafe { Avx512(_mm512_min_pd(self.0, other.0)) }
@@ -276,14 +281,8 @@ unsafe impl Wide for Avx512 {
     unsafe fn splat_i(k: i32) -> __m256i {
         unsafe { _mm256_set1_epi32(k) }
     }
-    #[inline(always)]
-    unsafe fn add_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_add_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn sub_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_sub_epi32(a, b) }
-    }
+    binary_i!(add_i, _mm256_add_epi32);
+    binary_i!(sub_i, _mm256_sub_epi32);
     #[inline(always)]
     unsafe fn greater_i(a: __m256i, b: __m256i) -> __mmask8 {
         unsafe { _mm256_cmpgt_epi32_mask(a, b) }
@@ -308,26 +307,11 @@ unsafe impl Wide for Avx512 {
     unsafe fn ones_i(m: Bits) -> __m256i {
         unsafe { _mm256_maskz_mov_epi32(lanes(m), _mm256_set1_epi32(1)) }
     }
-    #[inline(always)]
-    unsafe fn and_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_and_si256(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max_unsigned_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_max_epu32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min_unsigned_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_min_epu32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_max_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_min_epi32(a, b) }
-    }
+    binary_i!(and_i, _mm256_and_si256);
+    binary_i!(max_unsigned_i, _mm256_max_epu32);
+    binary_i!(min_unsigned_i, _mm256_min_epu32);
+    binary_i!(max_i, _mm256_max_epi32);
+    binary_i!(min_i, _mm256_min_epi32);
     #[inline(always)]
     unsafe fn half_i(k: __m256i) -> __m256i {
         unsafe { _mm256_srai_epi32::<1>(k) }
