@@ -391,7 +391,8 @@ mod disc_pairs {
 mod polygon_lanes {
     use super::pair;
     use sdem::geometry::intersection_lanes::{
-        BLOCK, BlockContacts, BlockKernel, LanePair, OwnedLaneShape, PAIRS, grain_grain_blocks,
+        BLOCK, BLOCKS, BlockContacts, BlockKernel, LanePair, OwnedLaneShape, PAIRS,
+        grain_grain_blocks,
     };
     use sdem::geometry::{ContourTable, GrainShape, PairHint, grain_grain_hinted};
     use std::hint::black_box;
@@ -428,7 +429,7 @@ mod polygon_lanes {
         let mut hints = [four_hints, four_hints].concat();
         let shapes =
             pairs.map(|at| at.map(|(i, j)| [OwnedLaneShape::of(&i), OwnedLaneShape::of(&j)]));
-        let mut contacts = [BlockContacts::default(); 2];
+        let mut contacts = [BlockContacts::default(); BLOCKS];
         let mut call = 0usize;
         let mut on_path = 0;
         bencher

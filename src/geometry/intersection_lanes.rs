@@ -1,14 +1,14 @@
-//! The common path of [`grain_grain_hinted`] for four pairs side by side, in AVX registers, or
-//! eight in AVX-512 ones (issue #16): two contours that were in contact last step, whose
-//! chains' ends moved by at most one node and whose crossings lie on, or next to, the edges of
-//! j they lay on last step.
+//! The common path of [`grain_grain_hinted`] for eight pairs side by side, in AVX-512
+//! registers or in pairs of AVX ones (issue #16): two contours that were in contact last step,
+//! whose chains' ends moved by at most one node and whose crossings lie on, or next to, the
+//! edges of j they lay on last step.
 //!
 //! Nearly every contact of a dense packing takes that path every step, and one pair at a time
 //! it is a long chain of dependent loads, products and branches. Here its arithmetic runs in
 //! the lanes of vectors, each lane's choices made by masks and blends; the kernel is written
-//! once (`kernel`, over a width's lanes) for four lanes (`avx`) and for eight (`avx512`). The
-//! chain, not the arithmetic, bounds its time, so that eight lanes compute two blocks in little
-//! more than one's time: 1.21 times the full level's steps a second at 10⁵ grains. Every quantity
+//! once (`kernel`, over a width's lanes) for four lanes (`avx`), eight in pairs of them
+//! (`avx_pair`) and eight in AVX-512 registers (`avx512`). The chain, not the arithmetic,
+//! bounds its time, so that eight lanes compute two blocks in about one's time. Every quantity
 //! is computed with the operations of the one-pair path, in its order (products and sums as
 //! glam computes them), so that a lane gives that path's bits; a lane that would leave the path
 //! (an end that moved further, a node in the thin ring where the inside test needs its sector,
@@ -157,6 +157,9 @@ impl BlockContacts {
 /// Pairs a call of [`grain_grain_blocks`] computes: two blocks.
 pub const PAIRS: usize = 2 * BLOCK;
 
+/// The blocks of a call of [`grain_grain_blocks`].
+pub const BLOCKS: usize = PAIRS / BLOCK;
+
 /// How [`grain_grain_blocks`] computes its eight lanes: in pairs of AVX registers, or in
 /// AVX-512 ones. Made only by [`available`](Self::available) and [`best`](Self::best), so that
 /// a kernel in hand runs on this processor.
@@ -200,16 +203,9 @@ impl BlockKernel {
     }
 }
 
-/// Whether this processor runs [`grain_grain_blocks`]' lanes (else every pair takes the one-pair
-/// path).
-pub fn block_available() -> bool {
-    BlockKernel::best().is_some()
-}
-
-/// The contacts of two blocks of [`BLOCK`] pairs on the common path (see the module's docs),
-/// `pairs[..BLOCK]` to `contacts[0]` and the rest to `contacts[1]`, by `kernel`, of which the
-/// first `filled` count (the second block may be left unwritten where they fit in the first):
-/// each lane's
+/// The contacts of [`BLOCKS`] blocks of [`BLOCK`] pairs on the common path (see the module's
+/// docs), block `b`'s pairs `pairs[4b..4b + 4]` to `contacts[b]`, by `kernel`, of which the
+/// first `filled` count (a block after theirs may be left unwritten): each lane's
 /// [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for that pair (always a
 /// contact there) and the hint it leaves, whichever the kernel; `None` where the pair leaves
 /// the path. Neither grain of a pair is a circle ([`LaneShape`]); `shifted`: j's centres are
@@ -222,7 +218,7 @@ pub fn grain_grain_blocks(
     pairs: &[LanePair<'_>; PAIRS],
     shifted: bool,
     filled: usize,
-    contacts: &mut [BlockContacts; 2],
+    contacts: &mut [BlockContacts; BLOCKS],
 ) {
     #[cfg(target_arch = "x86_64")]
     match kernel.0 {
@@ -304,7 +300,7 @@ mod tests {
         // returns for its pair from the same hint (contact and next hint), whatever the lane,
         // the pairs beside it and the kernel (AVX-512 or pairs of AVX registers, each where
         // the processor runs it); and most pairs a step after a contact take that path.
-        if !block_available() {
+        if BlockKernel::available().is_empty() {
             return;
         }
         let table = ContourTable::new(1.0);
@@ -346,20 +342,17 @@ mod tests {
                     };
                 }
                 // Every kernel this processor runs, on both blocks and on the first alone (which
-                // a kernel may compute in fewer lanes): the same contacts, bit for bit.
-                let kernels = BlockKernel::available();
-                let mut results: Vec<(&str, [BlockContacts; 2])> = Vec::new();
-                for &kernel in &kernels {
+                // a kernel may compute in fewer lanes): the same contacts, bit for bit, in the
+                // lanes that count.
+                let mut results: Vec<(&str, usize, [BlockContacts; BLOCKS])> = Vec::new();
+                for kernel in BlockKernel::available() {
                     for filled in [PAIRS, BLOCK] {
-                        let mut contacts = [BlockContacts::default(); 2];
+                        let mut contacts = [BlockContacts::default(); BLOCKS];
                         grain_grain_blocks(kernel, &table, &lanes, shifted, filled, &mut contacts);
-                        if filled == BLOCK {
-                            contacts[1] = results.last().expect("both blocks first").1[1];
-                        }
-                        results.push((kernel.name(), contacts));
+                        results.push((kernel.name(), filled, contacts));
                     }
                 }
-                let contacts = results[0].1;
+                let contacts = results[0].2;
                 for (l, (_, start_hint, i, j)) in block.iter().enumerate() {
                     let mut j = *j;
                     if shifted {
@@ -371,11 +364,11 @@ mod tests {
                     total += 1;
                     let lane = contacts[l / BLOCK].lane(l % BLOCK);
                     // Bit for bit: `{:?}` writes each f64 exactly, and the sign of a zero.
-                    for (kernel, other) in &results {
+                    for (kernel, filled, other) in results.iter().filter(|r| l < r.1) {
                         assert_eq!(
                             format!("{:?}", other[l / BLOCK].lane(l % BLOCK)),
                             format!("{lane:?}"),
-                            "lane {l}, {kernel}"
+                            "lane {l} of {filled}, {kernel}"
                         );
                     }
                     if let Some((contact, next_hint)) = lane {

@@ -13,8 +13,8 @@
 //! Pairs of contour polygons that were in contact last step go eight at a time through the
 //! common path of their contact in vector lanes ([`grain_grain_blocks`], two blocks of four):
 //! the pass fills the blocks with the next such pairs within `POLYGON_WINDOW` and takes their
-//! results in pair order (`PolygonsAhead`). The same lanes then give the block's normal forces (the law, the
-//! relative velocity at the contact point and the dashpot: `polygon_pair_forces`). A lane gives
+//! results in pair order (`PolygonsAhead`). The same lanes then give each block's normal
+//! forces (the law, the relative velocity at the contact point and the dashpot: `polygon_pair_forces`). A lane gives
 //! the one-pair path's bits or leaves the pair to it (a lane whose law left its domain leaves
 //! from its contact), so the blocks' make-up (which changes with the chunks, and so with the
 //! thread count) changes nothing.
@@ -33,7 +33,7 @@ use crate::geometry::circle::{
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
-    BLOCK, BlockContacts, BlockKernel, LaneContact, LanePair, PAIRS, grain_grain_blocks,
+    BLOCK, BLOCKS, BlockContacts, BlockKernel, LaneContact, LanePair, PAIRS, grain_grain_blocks,
 };
 use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -174,13 +174,7 @@ impl<'a> PairPass<'a> {
             if POLYGONS && let Some(lane) = polygons.computed(k) {
                 // The second block of two computed at once (eight lanes): as the first below.
                 if !FRICTIONAL && self.periodic.is_none() && polygons.holds_block_from(lane, k) {
-                    let block = k..k + BLOCK;
-                    polygons.record_block(
-                        lane,
-                        &mut states[block.clone()],
-                        &mut actives[block.clone()],
-                        &mut records[block],
-                    );
+                    polygons.record_block(lane, k, states, actives, records);
                     k += BLOCK;
                     continue;
                 }
@@ -243,13 +237,7 @@ impl<'a> PairPass<'a> {
                     && lane == Some(0)
                     && polygons.holds_block_from(0, k)
                 {
-                    let block = k..k + BLOCK;
-                    polygons.record_block(
-                        0,
-                        &mut states[block.clone()],
-                        &mut actives[block.clone()],
-                        &mut records[block],
-                    );
+                    polygons.record_block(0, k, states, actives, records);
                     k += BLOCK;
                     continue;
                 }
@@ -669,10 +657,10 @@ struct PolygonsAhead<'a> {
     /// their pairs' frames.
     block: [LanePair<'a>; PAIRS],
     ends: [[&'a Frame; 2]; PAIRS],
-    results: [BlockContacts; 2],
+    results: [BlockContacts; BLOCKS],
     /// The blocks' pairs as their normal forces read them, and those forces.
-    input: [PolygonPairs; 2],
-    forces: [PolygonPairForces; 2],
+    input: [PolygonPairs; BLOCKS],
+    forces: [PolygonPairForces; BLOCKS],
     filled: usize,
     taken: usize,
 }
@@ -691,9 +679,9 @@ impl<'a> PolygonsAhead<'a> {
             pairs: [0; PAIRS],
             block: [LanePair::default(); PAIRS],
             ends: [[&SPARE_FRAME; 2]; PAIRS],
-            results: [BlockContacts::default(); 2],
-            input: [PolygonPairs::default(); 2],
-            forces: [PolygonPairForces::default(); 2],
+            results: [BlockContacts::default(); BLOCKS],
+            input: [PolygonPairs::default(); BLOCKS],
+            forces: [PolygonPairForces::default(); BLOCKS],
             filled: 0,
             taken: 0,
         }
@@ -727,8 +715,9 @@ impl<'a> PolygonsAhead<'a> {
             && (0..BLOCK).all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
     }
 
-    /// Writes the states, flags and records of the pairs of the block from `lane`, where
-    /// [`holds_block_from`](Self::holds_block_from) says that they are its contacts, as
+    /// Writes the states, flags and records of the chunk's pairs `k..k + BLOCK`, the block
+    /// from `lane`, where [`holds_block_from`](Self::holds_block_from) says that they are its
+    /// contacts, as
     /// [`PairPass::record`] writes each one's without friction: the contact with its normal
     /// force, no tangential force, and the hint and length in the state. Takes every lane of
     /// the block.
@@ -736,22 +725,28 @@ impl<'a> PolygonsAhead<'a> {
     fn record_block(
         &mut self,
         lane: usize,
+        k: usize,
         states: &mut [PairState],
         actives: &mut [bool],
         records: &mut [PairContact],
     ) {
+        let pairs = k..k + BLOCK;
         let (states, actives, records): (
             &mut [PairState; BLOCK],
             &mut [bool; BLOCK],
             &mut [PairContact; BLOCK],
         ) = (
-            states.try_into().expect("a block's states"),
-            actives.try_into().expect("a block's flags"),
-            records.try_into().expect("a block's records"),
+            (&mut states[pairs.clone()])
+                .try_into()
+                .expect("a block's states"),
+            (&mut actives[pairs.clone()])
+                .try_into()
+                .expect("a block's flags"),
+            (&mut records[pairs]).try_into().expect("a block's records"),
         );
+        let block = lane / BLOCK;
         // SAFETY: blocks are computed only where the processor has AVX (`table` is set only
         // there: `new`).
-        let block = lane / BLOCK;
         #[cfg(target_arch = "x86_64")]
         unsafe {
             self.write_records_avx(block, records)

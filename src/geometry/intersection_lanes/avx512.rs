@@ -5,7 +5,7 @@
 
 use super::avx::{hints4, store_hints4};
 use super::kernel::{Bits, V2, Wide};
-use super::{BLOCK, BlockContacts, LanePair};
+use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Sub};
 
@@ -371,7 +371,7 @@ pub(super) unsafe fn grain_grain_blocks(
     table: &crate::geometry::contour::ContourTable,
     pairs: &[LanePair<'_>; 2 * BLOCK],
     shifted: bool,
-    out: &mut [BlockContacts; 2],
+    out: &mut [BlockContacts; BLOCKS],
 ) {
     unsafe { super::kernel::grain_grain_lanes::<Avx512>(table, pairs, shifted, out) }
 }

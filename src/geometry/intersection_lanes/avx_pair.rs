@@ -5,7 +5,7 @@
 
 use super::avx::Avx;
 use super::kernel::{Bits, V2, Wide};
-use super::{BLOCK, BlockContacts, LanePair};
+use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Sub};
 
@@ -252,7 +252,7 @@ pub(super) unsafe fn grain_grain_blocks(
     pairs: &[LanePair<'_>; 2 * BLOCK],
     shifted: bool,
     filled: usize,
-    out: &mut [BlockContacts; 2],
+    out: &mut [BlockContacts; BLOCKS],
 ) {
     unsafe {
         if filled <= BLOCK {
