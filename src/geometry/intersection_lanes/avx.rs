@@ -1,53 +1,65 @@
 //! Four lanes of the kernel in AVX registers: `f64`s in `__m256d`, node indices in `__m128i`
-//! (SSE4.1, which AVX implies), lanes' selections as `movemask` bits and blend masks loaded
-//! from a table. The half of [`super::avx_pair`]'s eight lanes.
+//! (SSE4.1, which AVX implies), lanes' selections by sign bits ([`SignMask`]). The half of
+//! [`super::avx_pair`]'s eight lanes.
 
 use super::kernel::{Bits, V2, Wide};
 use super::{BLOCK, BlockContacts, LanePair};
 use crate::geometry::intersection::PairHint;
 use std::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 
 /// Four `f64` lanes.
 #[derive(Clone, Copy)]
 pub(super) struct Avx(__m256d);
 
-/// The blend masks of the sixteen sets of lanes, `BLEND_MASKS[b]` all ones in the lanes of
-/// `b`: one load where a mask built lane by lane took a branch and an insert a lane.
-static BLEND_MASKS: [[i64; 4]; 16] = {
-    let mut masks = [[0; 4]; 16];
-    let mut b = 0;
-    while b < 16 {
-        let mut l = 0;
-        while l < 4 {
-            if b & (1 << l) != 0 {
-                masks[b][l] = -1;
-            }
-            l += 1;
-        }
-        b += 1;
-    }
-    masks
-};
+/// A selection of four lanes: lane `l` selected where the sign bit of its `f64` is set, the
+/// one bit that `blendv`, `movemask` and `vtestpd` read. A comparison sets every bit of a lane
+/// it selects; an index comparison, converted to `f64`s, gives -1.0 (only the sign and a few
+/// exponent bits); and, or and not keep the sign bit right for both. A blend reads it where a
+/// table of masks indexed by `movemask` bits needed three dependent instructions more.
+#[derive(Clone, Copy)]
+pub(super) struct SignMask(__m256d);
 
-/// All bits set in the lanes of `b`: a blend mask.
-#[inline(always)]
-unsafe fn mask(b: Bits) -> __m256d {
-    debug_assert!(b < 16);
-    // SAFETY: `b` lies in [0, 16) (four lanes' bits), and each entry is 32 bytes.
-    unsafe { _mm256_loadu_pd(BLEND_MASKS.get_unchecked(b as usize).as_ptr().cast::<f64>()) }
+impl BitAnd for SignMask {
+    type Output = SignMask;
+    #[inline(always)]
+    fn bitand(self, other: SignMask) -> SignMask {
+        // SAFETY: `SignMask`s exist only inside a kernel compiled for AVX.
+        SignMask(unsafe { _mm256_and_pd(self.0, other.0) })
+    }
 }
 
-/// All bits set in the lanes of `b`, as indices' mask.
-#[inline(always)]
-unsafe fn mask_i(b: Bits) -> __m128i {
-    unsafe {
-        let wide = mask(b);
-        // Each 64-bit lane's low half.
-        _mm_castps_si128(_mm_shuffle_ps::<0b10_00_10_00>(
-            _mm256_castps256_ps128(_mm256_castpd_ps(wide)),
-            _mm256_extractf128_ps::<1>(_mm256_castpd_ps(wide)),
-        ))
+impl BitOr for SignMask {
+    type Output = SignMask;
+    #[inline(always)]
+    fn bitor(self, other: SignMask) -> SignMask {
+        // SAFETY: as `bitand`.
+        SignMask(unsafe { _mm256_or_pd(self.0, other.0) })
+    }
+}
+
+impl Not for SignMask {
+    type Output = SignMask;
+    /// (An exclusive or with all ones, which an `and` after it folds into `andnpd`.)
+    #[inline(always)]
+    fn not(self) -> SignMask {
+        // SAFETY: as `bitand`.
+        SignMask(unsafe { _mm256_xor_pd(self.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) })
+    }
+}
+
+impl SignMask {
+    /// The selection of index lanes (`i32`s): each 64-bit lane's upper half, which holds its
+    /// sign bit.
+    #[inline(always)]
+    unsafe fn narrow(self) -> __m128 {
+        unsafe {
+            let m = _mm256_castpd_ps(self.0);
+            _mm_shuffle_ps::<0b11_01_11_01>(
+                _mm256_castps256_ps128(m),
+                _mm256_extractf128_ps::<1>(m),
+            )
+        }
     }
 }
 
@@ -135,12 +147,12 @@ arithmetic!(Sub, sub, _mm256_sub_pd);
 arithmetic!(Mul, mul, _mm256_mul_pd);
 arithmetic!(Div, div, _mm256_div_pd);
 
-/// A comparison of lanes, as the lanes' bits.
+/// A comparison of lanes.
 macro_rules! compare {
     ($method:ident, $predicate:ident) => {
         #[inline(always)]
-        unsafe fn $method(self, other: Self) -> Bits {
-            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<$predicate>(self.0, other.0)) as Bits }
+        unsafe fn $method(self, other: Self) -> SignMask {
+            unsafe { SignMask(_mm256_cmp_pd::<$predicate>(self.0, other.0)) }
         }
     };
 }
@@ -161,8 +173,25 @@ unsafe impl Wide for Avx {
     type I = __m128i;
     /// All ones in the selected lanes.
     type M = __m128i;
+    type B = SignMask;
     const LANES: usize = 4;
-    const ALL: Bits = 0b1111;
+
+    #[inline(always)]
+    unsafe fn no_lanes() -> SignMask {
+        unsafe { SignMask(_mm256_setzero_pd()) }
+    }
+    #[inline(always)]
+    unsafe fn all_lanes() -> SignMask {
+        unsafe { SignMask(_mm256_castsi256_pd(_mm256_set1_epi64x(-1))) }
+    }
+    #[inline(always)]
+    unsafe fn bits(b: SignMask) -> Bits {
+        unsafe { _mm256_movemask_pd(b.0) as Bits }
+    }
+    #[inline(always)]
+    unsafe fn none(b: SignMask) -> bool {
+        unsafe { _mm256_testz_pd(b.0, b.0) != 0 }
+    }
 
     #[inline(always)]
     unsafe fn splat(value: f64) -> Self {
@@ -186,12 +215,12 @@ unsafe impl Wide for Avx {
         unsafe { Avx(_mm256_min_pd(self.0, other.0)) }
     }
     #[inline(always)]
-    unsafe fn blend(self, other: Self, m: Bits) -> Self {
-        unsafe { Avx(_mm256_blendv_pd(self.0, other.0, mask(m))) }
+    unsafe fn blend(self, other: Self, m: SignMask) -> Self {
+        unsafe { Avx(_mm256_blendv_pd(self.0, other.0, m.0)) }
     }
     #[inline(always)]
-    unsafe fn keep(self, m: Bits) -> Self {
-        unsafe { Avx(_mm256_and_pd(self.0, mask(m))) }
+    unsafe fn keep(self, m: SignMask) -> Self {
+        unsafe { Avx(_mm256_blendv_pd(_mm256_setzero_pd(), self.0, m.0)) }
     }
     #[inline(always)]
     unsafe fn from_indices(k: __m128i) -> Self {
@@ -257,21 +286,28 @@ unsafe impl Wide for Avx {
     binary_i!(sub_i, _mm_sub_epi32);
     binary_i!(greater_i, _mm_cmpgt_epi32);
     binary_i!(equal_i, _mm_cmpeq_epi32);
+    /// (-1 converts to -1.0, 0 to +0.0.)
     #[inline(always)]
-    unsafe fn bits_i(m: __m128i) -> Bits {
-        unsafe { _mm_movemask_ps(_mm_castsi128_ps(m)) as Bits }
+    unsafe fn lanes_i(m: __m128i) -> SignMask {
+        unsafe { SignMask(_mm256_cvtepi32_pd(m)) }
     }
     #[inline(always)]
     unsafe fn where_i(m: __m128i, a: __m128i) -> __m128i {
         unsafe { _mm_and_si128(m, a) }
     }
     #[inline(always)]
-    unsafe fn select_i(a: __m128i, b: __m128i, m: Bits) -> __m128i {
-        unsafe { _mm_blendv_epi8(a, b, mask_i(m)) }
+    unsafe fn select_i(a: __m128i, b: __m128i, m: SignMask) -> __m128i {
+        unsafe {
+            _mm_castps_si128(_mm_blendv_ps(
+                _mm_castsi128_ps(a),
+                _mm_castsi128_ps(b),
+                m.narrow(),
+            ))
+        }
     }
     #[inline(always)]
-    unsafe fn ones_i(m: Bits) -> __m128i {
-        unsafe { _mm_srli_epi32::<31>(mask_i(m)) }
+    unsafe fn ones_i(m: SignMask) -> __m128i {
+        unsafe { _mm_srli_epi32::<31>(_mm_castps_si128(m.narrow())) }
     }
     binary_i!(and_i, _mm_and_si128);
     binary_i!(max_unsigned_i, _mm_max_epu32);

@@ -7,7 +7,7 @@ use super::avx::{hints4, store_hints4};
 use super::kernel::{Bits, V2, Wide};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 
 /// Eight `f64` lanes.
 #[derive(Clone, Copy)]
@@ -67,18 +67,40 @@ unsafe fn points_of_rows(q01: __m512d, q23: __m512d, q45: __m512d, q67: __m512d)
     }
 }
 
-/// The mask register of the lanes `b`.
-#[inline(always)]
-fn lanes(b: Bits) -> __mmask8 {
-    b as __mmask8
+/// A selection of eight lanes, a mask register's bits.
+#[derive(Clone, Copy)]
+pub(super) struct Lanes(__mmask8);
+
+impl BitAnd for Lanes {
+    type Output = Lanes;
+    #[inline(always)]
+    fn bitand(self, other: Lanes) -> Lanes {
+        Lanes(self.0 & other.0)
+    }
 }
 
-/// A comparison of lanes, as the lanes' bits.
+impl BitOr for Lanes {
+    type Output = Lanes;
+    #[inline(always)]
+    fn bitor(self, other: Lanes) -> Lanes {
+        Lanes(self.0 | other.0)
+    }
+}
+
+impl Not for Lanes {
+    type Output = Lanes;
+    #[inline(always)]
+    fn not(self) -> Lanes {
+        Lanes(!self.0)
+    }
+}
+
+/// A comparison of lanes.
 macro_rules! compare {
     ($method:ident, $predicate:ident) => {
         #[inline(always)]
-        unsafe fn $method(self, other: Self) -> Bits {
-            unsafe { _mm512_cmp_pd_mask::<$predicate>(self.0, other.0) as Bits }
+        unsafe fn $method(self, other: Self) -> Lanes {
+            unsafe { Lanes(_mm512_cmp_pd_mask::<$predicate>(self.0, other.0)) }
         }
     };
 }
@@ -98,8 +120,25 @@ macro_rules! binary_i {
 unsafe impl Wide for Avx512 {
     type I = __m256i;
     type M = __mmask8;
+    type B = Lanes;
     const LANES: usize = 8;
-    const ALL: Bits = 0xff;
+
+    #[inline(always)]
+    unsafe fn no_lanes() -> Lanes {
+        Lanes(0)
+    }
+    #[inline(always)]
+    unsafe fn all_lanes() -> Lanes {
+        Lanes(0xff)
+    }
+    #[inline(always)]
+    unsafe fn bits(b: Lanes) -> Bits {
+        b.0 as Bits
+    }
+    #[inline(always)]
+    unsafe fn none(b: Lanes) -> bool {
+        b.0 == 0
+    }
 
     #[inline(always)]
     unsafe fn splat(value: f64) -> Self {
@@ -128,12 +167,12 @@ unsafe impl Wide for Avx512 {
         unsafe { Avx512(_mm512_min_pd(self.0, other.0)) }
     }
     #[inline(always)]
-    unsafe fn blend(self, other: Self, m: Bits) -> Self {
-        unsafe { Avx512(_mm512_mask_blend_pd(lanes(m), self.0, other.0)) }
+    unsafe fn blend(self, other: Self, m: Lanes) -> Self {
+        unsafe { Avx512(_mm512_mask_blend_pd(m.0, self.0, other.0)) }
     }
     #[inline(always)]
-    unsafe fn keep(self, m: Bits) -> Self {
-        unsafe { Avx512(_mm512_maskz_mov_pd(lanes(m), self.0)) }
+    unsafe fn keep(self, m: Lanes) -> Self {
+        unsafe { Avx512(_mm512_maskz_mov_pd(m.0, self.0)) }
     }
     #[inline(always)]
     unsafe fn from_indices(k: __m256i) -> Self {
@@ -292,20 +331,20 @@ unsafe impl Wide for Avx512 {
         unsafe { _mm256_cmpeq_epi32_mask(a, b) }
     }
     #[inline(always)]
-    unsafe fn bits_i(m: __mmask8) -> Bits {
-        m as Bits
+    unsafe fn lanes_i(m: __mmask8) -> Lanes {
+        Lanes(m)
     }
     #[inline(always)]
     unsafe fn where_i(m: __mmask8, a: __m256i) -> __m256i {
         unsafe { _mm256_maskz_mov_epi32(m, a) }
     }
     #[inline(always)]
-    unsafe fn select_i(a: __m256i, b: __m256i, m: Bits) -> __m256i {
-        unsafe { _mm256_mask_blend_epi32(lanes(m), a, b) }
+    unsafe fn select_i(a: __m256i, b: __m256i, m: Lanes) -> __m256i {
+        unsafe { _mm256_mask_blend_epi32(m.0, a, b) }
     }
     #[inline(always)]
-    unsafe fn ones_i(m: Bits) -> __m256i {
-        unsafe { _mm256_maskz_mov_epi32(lanes(m), _mm256_set1_epi32(1)) }
+    unsafe fn ones_i(m: Lanes) -> __m256i {
+        unsafe { _mm256_maskz_mov_epi32(m.0, _mm256_set1_epi32(1)) }
     }
     binary_i!(and_i, _mm256_and_si256);
     binary_i!(max_unsigned_i, _mm256_max_epu32);

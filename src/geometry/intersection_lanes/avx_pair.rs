@@ -3,11 +3,11 @@
 //! kernel's values (they spill), but the common path is a chain of dependent loads and
 //! operations, and two blocks' chains side by side still run in less than twice one's time.
 
-use super::avx::Avx;
+use super::avx::{Avx, SignMask};
 use super::kernel::{Bits, V2, Wide};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 
 /// Eight `f64` lanes: lanes 0 to 3, then 4 to 7.
 #[derive(Clone, Copy)]
@@ -29,16 +29,32 @@ arithmetic!(Sub, sub);
 arithmetic!(Mul, mul);
 arithmetic!(Div, div);
 
-/// The bits of two halves' lanes.
-#[inline(always)]
-fn join(low: Bits, high: Bits) -> Bits {
-    low | (high << BLOCK)
+/// A selection of eight lanes: the halves' selections.
+#[derive(Clone, Copy)]
+pub(super) struct PairMask(SignMask, SignMask);
+
+impl BitAnd for PairMask {
+    type Output = PairMask;
+    #[inline(always)]
+    fn bitand(self, other: PairMask) -> PairMask {
+        PairMask(self.0 & other.0, self.1 & other.1)
+    }
 }
 
-/// The low half's bits and the high half's.
-#[inline(always)]
-fn halves(b: Bits) -> (Bits, Bits) {
-    (b & Avx::ALL, (b >> BLOCK) & Avx::ALL)
+impl BitOr for PairMask {
+    type Output = PairMask;
+    #[inline(always)]
+    fn bitor(self, other: PairMask) -> PairMask {
+        PairMask(self.0 | other.0, self.1 | other.1)
+    }
+}
+
+impl Not for PairMask {
+    type Output = PairMask;
+    #[inline(always)]
+    fn not(self) -> PairMask {
+        PairMask(!self.0, !self.1)
+    }
 }
 
 /// Two halves of points as points of eight lanes.
@@ -53,8 +69,8 @@ fn pair_points<const K: usize>(low: [V2<Avx>; K], high: [V2<Avx>; K]) -> [V2<Avx
 macro_rules! compare {
     ($method:ident) => {
         #[inline(always)]
-        unsafe fn $method(self, other: Self) -> Bits {
-            unsafe { join(self.0.$method(other.0), self.1.$method(other.1)) }
+        unsafe fn $method(self, other: Self) -> PairMask {
+            unsafe { PairMask(self.0.$method(other.0), self.1.$method(other.1)) }
         }
     };
 }
@@ -65,8 +81,25 @@ type I = (__m128i, __m128i);
 unsafe impl Wide for AvxPair {
     type I = I;
     type M = (__m128i, __m128i);
+    type B = PairMask;
     const LANES: usize = 8;
-    const ALL: Bits = 0xff;
+
+    #[inline(always)]
+    unsafe fn no_lanes() -> PairMask {
+        unsafe { PairMask(Avx::no_lanes(), Avx::no_lanes()) }
+    }
+    #[inline(always)]
+    unsafe fn all_lanes() -> PairMask {
+        unsafe { PairMask(Avx::all_lanes(), Avx::all_lanes()) }
+    }
+    #[inline(always)]
+    unsafe fn bits(b: PairMask) -> Bits {
+        unsafe { Avx::bits(b.0) | (Avx::bits(b.1) << BLOCK) }
+    }
+    #[inline(always)]
+    unsafe fn none(b: PairMask) -> bool {
+        unsafe { Avx::none(b.0 | b.1) }
+    }
 
     #[inline(always)]
     unsafe fn splat(value: f64) -> Self {
@@ -90,14 +123,12 @@ unsafe impl Wide for AvxPair {
         unsafe { AvxPair(self.0.min(other.0), self.1.min(other.1)) }
     }
     #[inline(always)]
-    unsafe fn blend(self, other: Self, m: Bits) -> Self {
-        let (low, high) = halves(m);
-        unsafe { AvxPair(self.0.blend(other.0, low), self.1.blend(other.1, high)) }
+    unsafe fn blend(self, other: Self, m: PairMask) -> Self {
+        unsafe { AvxPair(self.0.blend(other.0, m.0), self.1.blend(other.1, m.1)) }
     }
     #[inline(always)]
-    unsafe fn keep(self, m: Bits) -> Self {
-        let (low, high) = halves(m);
-        unsafe { AvxPair(self.0.keep(low), self.1.keep(high)) }
+    unsafe fn keep(self, m: PairMask) -> Self {
+        unsafe { AvxPair(self.0.keep(m.0), self.1.keep(m.1)) }
     }
     #[inline(always)]
     unsafe fn from_indices(k: I) -> Self {
@@ -166,22 +197,20 @@ unsafe impl Wide for AvxPair {
         unsafe { (Avx::equal_i(a.0, b.0), Avx::equal_i(a.1, b.1)) }
     }
     #[inline(always)]
-    unsafe fn bits_i(m: I) -> Bits {
-        unsafe { join(Avx::bits_i(m.0), Avx::bits_i(m.1)) }
+    unsafe fn lanes_i(m: I) -> PairMask {
+        unsafe { PairMask(Avx::lanes_i(m.0), Avx::lanes_i(m.1)) }
     }
     #[inline(always)]
     unsafe fn where_i(m: I, a: I) -> I {
         unsafe { (Avx::where_i(m.0, a.0), Avx::where_i(m.1, a.1)) }
     }
     #[inline(always)]
-    unsafe fn select_i(a: I, b: I, m: Bits) -> I {
-        let (low, high) = halves(m);
-        unsafe { (Avx::select_i(a.0, b.0, low), Avx::select_i(a.1, b.1, high)) }
+    unsafe fn select_i(a: I, b: I, m: PairMask) -> I {
+        unsafe { (Avx::select_i(a.0, b.0, m.0), Avx::select_i(a.1, b.1, m.1)) }
     }
     #[inline(always)]
-    unsafe fn ones_i(m: Bits) -> I {
-        let (low, high) = halves(m);
-        unsafe { (Avx::ones_i(low), Avx::ones_i(high)) }
+    unsafe fn ones_i(m: PairMask) -> I {
+        unsafe { (Avx::ones_i(m.0), Avx::ones_i(m.1)) }
     }
     #[inline(always)]
     unsafe fn and_i(a: I, b: I) -> I {

@@ -6,13 +6,13 @@
 use super::{BLOCK, BlockContacts, LanePair};
 use crate::geometry::contour::ContourTable;
 use crate::geometry::intersection::ChainHint;
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 
 /// Lanes as bits: bit `l` for lane `l`.
 pub(super) type Bits = u32;
 
-/// Lanes of `f64`s (`Self`) and of `i32` node indices ([`Wide::I`]), and the loads, stores
-/// and selections the kernel needs. Every method is an instruction or a few of the width's
+/// Lanes of `f64`s (`Self`), of `i32` node indices ([`Wide::I`]) and selections of lanes
+/// ([`Wide::B`]), and the loads, stores and selections the kernel needs. Every method is an instruction or a few of the width's
 /// instruction set, inlined into a kernel compiled for it; calling one elsewhere is unsound.
 ///
 /// # Safety
@@ -25,30 +25,40 @@ pub(super) unsafe trait Wide:
     type I: Copy;
     /// A selection of index lanes, as comparisons of indices give it.
     type M: Copy;
+    /// A selection of lanes, as comparisons give it and blends take it: kept in the form the
+    /// width's blends read (a vector register where they read one, a mask register in
+    /// AVX-512), so that a comparison feeds a blend without a round trip through bits.
+    type B: Copy + BitAnd<Output = Self::B> + BitOr<Output = Self::B> + Not<Output = Self::B>;
     const LANES: usize;
-    /// Every lane.
-    const ALL: Bits;
+
+    /// No lane, and every lane.
+    unsafe fn no_lanes() -> Self::B;
+    unsafe fn all_lanes() -> Self::B;
+    /// The selection as bits (none above `LANES`).
+    unsafe fn bits(b: Self::B) -> Bits;
+    /// Whether the selection is empty.
+    unsafe fn none(b: Self::B) -> bool;
 
     unsafe fn splat(value: f64) -> Self;
     unsafe fn sqrt(self) -> Self;
     /// The sign flipped (an exclusive or of the sign bit).
     unsafe fn neg(self) -> Self;
     /// The lanes where `self < other` (false for a NaN).
-    unsafe fn less(self, other: Self) -> Bits;
+    unsafe fn less(self, other: Self) -> Self::B;
     /// `self > other`.
-    unsafe fn greater(self, other: Self) -> Bits;
+    unsafe fn greater(self, other: Self) -> Self::B;
     /// `self >= other`.
-    unsafe fn at_least(self, other: Self) -> Bits;
+    unsafe fn at_least(self, other: Self) -> Self::B;
     /// `self <= other`.
-    unsafe fn at_most(self, other: Self) -> Bits;
+    unsafe fn at_most(self, other: Self) -> Self::B;
     /// `!(self <= other)`: true for a NaN.
-    unsafe fn not_at_most(self, other: Self) -> Bits;
+    unsafe fn not_at_most(self, other: Self) -> Self::B;
     /// The `minpd` instruction's minimum: `other` where either is a NaN or both are zeros.
     unsafe fn min(self, other: Self) -> Self;
     /// `other` in the lanes of `m`, else `self`.
-    unsafe fn blend(self, other: Self, m: Bits) -> Self;
+    unsafe fn blend(self, other: Self, m: Self::B) -> Self;
     /// `self` in the lanes of `m`, else `+0.0`.
-    unsafe fn keep(self, m: Bits) -> Self;
+    unsafe fn keep(self, m: Self::B) -> Self;
     unsafe fn from_indices(k: Self::I) -> Self;
     /// The lanes written to `to[..LANES]`.
     unsafe fn write_lanes(self, to: &mut [f64; 8]);
@@ -73,13 +83,13 @@ pub(super) unsafe trait Wide:
     unsafe fn greater_i(a: Self::I, b: Self::I) -> Self::M;
     /// The lanes where `a == b`.
     unsafe fn equal_i(a: Self::I, b: Self::I) -> Self::M;
-    unsafe fn bits_i(m: Self::M) -> Bits;
+    unsafe fn lanes_i(m: Self::M) -> Self::B;
     /// `a` in the lanes of `m`, else 0.
     unsafe fn where_i(m: Self::M, a: Self::I) -> Self::I;
     /// `b` in the lanes of `m`, else `a`.
-    unsafe fn select_i(a: Self::I, b: Self::I, m: Bits) -> Self::I;
+    unsafe fn select_i(a: Self::I, b: Self::I, m: Self::B) -> Self::I;
     /// 1 in the lanes of `m`, else 0.
-    unsafe fn ones_i(m: Bits) -> Self::I;
+    unsafe fn ones_i(m: Self::B) -> Self::I;
     unsafe fn and_i(a: Self::I, b: Self::I) -> Self::I;
     /// Unsigned maximum and minimum, signed maximum and minimum.
     unsafe fn max_unsigned_i(a: Self::I, b: Self::I) -> Self::I;
@@ -120,7 +130,7 @@ fn has(b: Bits, l: usize) -> bool {
 }
 
 #[inline(always)]
-unsafe fn blend<W: Wide>(a: V2<W>, b: V2<W>, m: Bits) -> V2<W> {
+unsafe fn blend<W: Wide>(a: V2<W>, b: V2<W>, m: W::B) -> V2<W> {
     unsafe {
         V2 {
             x: a.x.blend(b.x, m),
@@ -279,7 +289,7 @@ unsafe fn ring4<W: Wide>(table: &ContourTable, start: W::I) -> [V2<W>; 4] {
 /// lanes: inside the inscribed circle, and outside the circumscribed one (a point in the ring
 /// between them, or a NaN, is in neither).
 #[inline(always)]
-unsafe fn inside_outside<W: Wide>(table: &ContourTable, u: V2<W>) -> (Bits, Bits) {
+unsafe fn inside_outside<W: Wide>(table: &ContourTable, u: V2<W>) -> (W::B, W::B) {
     unsafe {
         let r2 = dot(u, u);
         (
@@ -289,24 +299,24 @@ unsafe fn inside_outside<W: Wide>(table: &ContourTable, u: V2<W>) -> (Bits, Bits
     }
 }
 
-/// Where a chain's end moved, lanes as bits (see [`end_moved`]).
+/// Where a chain's end moved, by lanes (see [`end_moved`]).
 #[derive(Clone, Copy)]
-struct Moved {
-    back: Bits,
-    stayed: Bits,
-    on: Bits,
+struct Moved<W: Wide> {
+    back: W::B,
+    stayed: W::B,
+    on: W::B,
 }
 
-impl Moved {
+impl<W: Wide> Moved<W> {
     /// The lanes whose end moved by at most a node.
     #[inline(always)]
-    fn settled(self) -> Bits {
+    fn settled(self) -> W::B {
         self.back | self.stayed | self.on
     }
 
     /// The offsets of the ends along their outward direction: -1, 0 or 1.
     #[inline(always)]
-    unsafe fn offsets<W: Wide>(self) -> W::I {
+    unsafe fn offsets(self) -> W::I {
         unsafe { W::sub_i(W::ones_i(self.on), W::ones_i(self.back)) }
     }
 }
@@ -324,7 +334,7 @@ unsafe fn end_moved<W: Wide>(
     t: V2<W>,
     end: W::I,
     outward: isize,
-) -> ([V2<W>; 4], [V2<W>; 4], Moved) {
+) -> ([V2<W>; 4], [V2<W>; 4], Moved<W>) {
     unsafe {
         // The four nodes lie together in memory: from end - 1 up for the hi end (outward
         // 1), from end - 2 up, in the reverse order, for the lo end.
@@ -345,8 +355,8 @@ unsafe fn end_moved<W: Wide>(
         let (beyond_inside, beyond_outside) = inside_outside(table, nodes[2]);
         let (_, further_outside) = inside_outside(table, nodes[3]);
         // The end moved back (its node left, the one behind it is in), stayed, or moved on
-        // (the node beyond came in, the one after it is out): bit l of each for lane l. The
-        // three exclude each other: a node is not both in and out.
+        // (the node beyond came in, the one after it is out). The three exclude each other: a
+        // node is not both in and out.
         let moved = Moved {
             back: at_end_outside & back_inside,
             stayed: at_end_inside & beyond_outside,
@@ -359,7 +369,7 @@ unsafe fn end_moved<W: Wide>(
 /// The chain's end node and the node beyond it, from [`end_moved`]'s nodes and where the end
 /// moved.
 #[inline(always)]
-unsafe fn end_and_beyond<W: Wide>(nodes: &[V2<W>; 4], moved: Moved) -> (V2<W>, V2<W>) {
+unsafe fn end_and_beyond<W: Wide>(nodes: &[V2<W>; 4], moved: Moved<W>) -> (V2<W>, V2<W>) {
     unsafe {
         (
             blend(blend(nodes[1], nodes[0], moved.back), nodes[2], moved.on),
@@ -400,16 +410,16 @@ unsafe fn exit_near<W: Wide>(
     p_in: V2<W>,
     p_out: V2<W>,
     guess: W::I,
-) -> (W, W::I, Bits, [V2<W>; 2]) {
+) -> (W, W::I, W::B, [V2<W>; 2]) {
     unsafe {
         let direction = sub(p_out, p_in);
         let apothem = W::splat(table.apothem);
         let (zero, one) = (W::splat(0.0), W::splat(1.0));
         let mut edge = guess;
         let mut t = zero;
-        let mut found = 0;
+        let mut found = W::no_lanes();
         // The lanes still looking.
-        let mut open = W::ALL;
+        let mut open = W::all_lanes();
         let mut ends = [V2 { x: zero, y: zero }; 2];
         for _try in 0..2 {
             let [start, end, normal] = edges::<W>(table, edge);
@@ -426,10 +436,10 @@ unsafe fn exit_near<W: Wide>(
             let within = t_try.greater(zero) & t_try.at_most(one);
             // A lane whose edge of a does not rise through b's edge line stops, unfound.
             let hit = open & rising & after_start & before_end;
-            found |= hit & within;
+            found = found | (hit & within);
             t = t.blend(t_try, hit);
-            open &= rising & !hit;
-            if open == 0 {
+            open = open & rising & !hit;
+            if W::none(open) {
                 break;
             }
             // The next edge round where the crossing lies after this one's start, else the one
@@ -487,17 +497,15 @@ unsafe fn cap_area_and_depth<W: Wide>(
         let count = W::add_i(W::sub_i(W::min_i(W::add_i(middle, one), hi), start), one);
         // The lanes with more than one node, and with more than two.
         let more = [
-            0,
-            W::bits_i(W::greater_i(count, one)),
-            W::bits_i(W::greater_i(count, W::splat_i(2))),
+            W::lanes_i(W::greater_i(count, one)),
+            W::lanes_i(W::greater_i(count, W::splat_i(2))),
         ];
         let support = transpose_mul_vec(map, outward);
         let around = ring4::<W>(table, start);
         let mut reach = dot(around[0], support);
-        #[allow(clippy::needless_range_loop)] // (an iterator's `skip` stays a loop)
-        for k in 1..3 {
-            let r = dot(around[k], support);
-            reach = reach.blend(r, r.greater(reach) & more[k]);
+        for (node, more) in around[1..3].iter().zip(more) {
+            let r = dot(*node, support);
+            reach = reach.blend(r, r.greater(reach) & more);
         }
         (dot(sub(center, origin), outward) + reach).write_lanes(depth);
         for d in depth.iter_mut().take(W::LANES) {
@@ -561,11 +569,11 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
             W::max_unsigned_i(first_lo, first_hi),
             W::max_unsigned_i(second_lo, second_hi),
         );
-        let hints_in_turn = W::bits_i(W::equal_i(
+        let hints_in_turn = W::lanes_i(W::equal_i(
             W::min_unsigned_i(largest, W::splat_i(turn - 1)),
             largest,
         ));
-        let short = W::bits_i(W::greater_i(
+        let short = W::lanes_i(W::greater_i(
             W::splat_i(half as i32),
             W::sub_i(chain_hi, first_lo),
         ));
@@ -587,7 +595,7 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
         // without them takes node 0), and a chain shorter than N / 2; the ends' nodes reach
         // from lo - 2 to hi + 2, i's new chain keeps lo in [-1, N] and hi under lo + N / 2, and
         // j's chain runs within [0, 2N) with its middle under 3N / 2.
-        let mut on_path: Bits = hints_in_turn & short;
+        let mut on_path = hints_in_turn & short;
         let zero_i = W::splat_i(0);
         let mut lo = W::select_i(zero_i, first_lo, on_path);
         let mut hi = W::select_i(zero_i, chain_hi, on_path);
@@ -615,28 +623,28 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
         // The lanes whose ends both moved by at most a node, into a chain still short: they
         // take the new ends; the others keep theirs and leave the path.
         let (new_lo, new_hi) = (
-            W::sub_i(lo, moved_lo.offsets::<W>()),
-            W::add_i(hi, moved_hi.offsets::<W>()),
+            W::sub_i(lo, moved_lo.offsets()),
+            W::add_i(hi, moved_hi.offsets()),
         );
         let moved = moved_lo.settled()
             & moved_hi.settled()
             & near
-            & !W::bits_i(W::greater_i(new_lo, new_hi))
-            & W::bits_i(W::greater_i(
+            & !W::lanes_i(W::greater_i(new_lo, new_hi))
+            & W::lanes_i(W::greater_i(
                 W::splat_i(half as i32),
                 W::sub_i(new_hi, new_lo),
             ));
         lo = W::select_i(lo, new_lo, moved);
         hi = W::select_i(hi, new_hi, moved);
-        on_path &= moved;
+        on_path = on_path & moved;
 
         let (t_lo, edge_lo, found_lo, ends_lo) = exit_near(table, lo_in, lo_out, guess_lo);
         let (t_hi, edge_hi, found_hi, ends_hi) = exit_near(table, hi_in, hi_out, guess_hi);
         let p_lo = crossing(center_i, map_i, vertex_lo, vertex_lo_out, t_lo);
         let p_hi = crossing(center_i, map_i, vertex_hi, vertex_hi_out, t_hi);
         // j's chain runs from the edge after p_hi's to p_lo's (none when both share an edge).
-        on_path &= found_lo & found_hi;
-        let j_chain = on_path & !W::bits_i(W::equal_i(edge_lo, edge_hi));
+        on_path = on_path & found_lo & found_hi;
+        let j_chain = on_path & !W::lanes_i(W::equal_i(edge_lo, edge_hi));
         let first = next_i::<W>(edge_hi, turn);
         let last = W::add_i(
             edge_lo,
@@ -690,7 +698,8 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
         // A chord shorter than rounding is no contact (a NaN length stays, as in the one-pair
         // path's test).
         let shortest = W::splat(f64::EPSILON) * reach_i.min(reach_j);
-        on_path &= length.not_at_most(shortest);
+        on_path = on_path & length.not_at_most(shortest);
+        let on_path = W::bits(on_path);
         for (b, block) in out.iter_mut().enumerate() {
             block.on_path = (on_path >> (BLOCK * b)) & ((1 << BLOCK) - 1);
         }
@@ -702,8 +711,13 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
         cap_area_i.store(out, |c| &mut c.cap_area_i);
         // Without a chain of j its cap and depth are zero.
         cap_area_j.keep(j_chain).store(out, |c| &mut c.cap_area_j);
+        let j_chain_bits = W::bits(j_chain);
         for l in 0..W::LANES {
-            let depth_j = if has(j_chain, l) { depth_j[l] } else { 0.0 };
+            let depth_j = if has(j_chain_bits, l) {
+                depth_j[l]
+            } else {
+                0.0
+            };
             out.get_unchecked_mut(l / BLOCK).normal_gap[l % BLOCK] = -0.5 * (depth_i[l] + depth_j);
         }
         // The next hints, pair by pair: without a chain of j its hint is none.
