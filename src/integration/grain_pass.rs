@@ -41,11 +41,9 @@ pub(super) struct GrainPass<'a> {
     pub cell: Option<PeriodicCell>,
     /// The walls grains meet (none in a periodic cell, whose virtual walls meet no grain).
     pub walls: &'a [Wall],
-    /// Each wall's friction coefficient (0 without friction).
-    pub wall_friction: [f64; MAX_WALLS],
-    /// Whether a wall has friction: then it drops the springs of the grains it no longer
-    /// touches, and every chunk visits it.
-    pub wall_springs: bool,
+    /// The walls with friction, bit `w` for wall `w`: each drops the springs of the grains it
+    /// no longer touches, and every chunk visits it.
+    pub wall_springs: u32,
     /// An affine phase's carry of the grain centres over the step (over the half, in a
     /// multi-rate cycle).
     pub carry: Option<BoxCarry>,
@@ -129,18 +127,16 @@ impl GrainPass<'_> {
         let (params, walls) = (self.params, self.walls);
         let density = params.material.density;
         let mut sums = ChunkSums::default();
-        let near_wall = walls_in_reach(chunk.centers, chunk.reach, walls);
+        let near = walls_in_reach(chunk.centers, chunk.reach, walls);
         let constants = UpdateConstants::new(params);
         // Not zeroed first: the 4 KB memset was 16 instructions a grain-step under callgrind
         // (`rep stosb`), and every entry a grain reads is written.
         let mut directions = [MaybeUninit::<DVec2>::uninit(); GRAIN_CHUNK];
         let directions = principal_directions(chunk.grains, chunk.levels, &mut directions);
-        // The walls the chunk's grains visit: none unless one is within reach or has springs
-        // to drop.
-        let chunk_walls = if self.wall_springs || near_wall.iter().any(|&near| near) {
-            walls
-        } else {
-            &[]
+        let chunk_walls = ChunkWalls {
+            walls,
+            near,
+            springs: self.wall_springs,
         };
         // A chunk with full-level or rigid grains, on a plain step, goes by blocks of four:
         // those whose grains are all at the full level, or all at the rigid level, have their
@@ -167,7 +163,6 @@ impl GrainPass<'_> {
                 &mut chunk,
                 chunk_level,
                 chunk_walls,
-                &near_wall,
                 &constants,
                 directions,
                 &mut sums,
@@ -196,7 +191,6 @@ impl GrainPass<'_> {
                     frame,
                     &mut chunk.wraps[k],
                     chunk_walls,
-                    &near_wall,
                     &constants,
                     directions[k],
                     &mut sums,
@@ -222,8 +216,7 @@ impl GrainPass<'_> {
         wall_history: &mut [f64; MAX_WALLS],
         frame: &Frame,
         wrap: &mut [i64; 2],
-        chunk_walls: &[Wall],
-        near_wall: &[bool; MAX_WALLS],
+        chunk_walls: ChunkWalls<'_>,
         constants: &UpdateConstants,
         direction: DVec2,
         sums: &mut ChunkSums,
@@ -249,7 +242,6 @@ impl GrainPass<'_> {
             turn,
             dt,
             chunk_walls,
-            near_wall,
             wall_history,
             &mut sums.totals,
             &mut sums.failure,
@@ -296,8 +288,7 @@ impl GrainPass<'_> {
         first: usize,
         chunk: &mut GrainChunk<'_>,
         chunk_level: Option<ModelLevel>,
-        chunk_walls: &[Wall],
-        near_wall: &[bool; MAX_WALLS],
+        chunk_walls: ChunkWalls<'_>,
         constants: &UpdateConstants,
         directions: &[DVec2],
         sums: &mut ChunkSums,
@@ -350,7 +341,6 @@ impl GrainPass<'_> {
                             &chunk.frames[k],
                             &mut chunk.wraps[k],
                             chunk_walls,
-                            near_wall,
                             constants,
                             directions[k],
                             sums,
@@ -373,7 +363,6 @@ impl GrainPass<'_> {
                     Turn::Plain,
                     self.dt,
                     chunk_walls,
-                    near_wall,
                     &mut chunk.wall_histories[k],
                     &mut sums.totals,
                     &mut wall_failure,
@@ -469,8 +458,7 @@ impl GrainPass<'_> {
     }
 
     /// The contact load of grain `g` (`frame`: the grain at the start of the step): its pairs'
-    /// forces, then those of the walls `walls` (of them, those `near_wall` says its chunk
-    /// reaches). The walls' forces and counts go to `totals` too, and the grain's first
+    /// forces, then those of the walls its chunk reaches (`walls`). The walls' forces and counts go to `totals` too, and the grain's first
     /// failure to `failure`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
@@ -480,8 +468,7 @@ impl GrainPass<'_> {
         frame: &Frame,
         turn: Turn,
         dt: f64,
-        walls: &[Wall],
-        near_wall: &[bool; MAX_WALLS],
+        walls: ChunkWalls<'_>,
         wall_history: &mut [f64; MAX_WALLS],
         totals: &mut StepTotals,
         failure: &mut Option<Instability>,
@@ -492,17 +479,22 @@ impl GrainPass<'_> {
             self.pair_load::<false>(g, frame)
         };
         let (params, step, tallied) = (self.params, self.step, turn.tallied());
-        for (w, wall) in walls.iter().enumerate() {
+        // In the walls' order, as the totals take their forces.
+        let mut visit = walls.near | walls.springs;
+        while visit != 0 {
+            let w = visit.trailing_zeros() as usize;
+            visit &= visit - 1;
+            let wall = &walls.walls[w];
             // A contact that is open this step drops its history. A wall without friction
             // never has one: its row is left untouched, not rewritten with zeros every
             // step.
-            let history = if self.wall_friction[w] > 0.0 {
+            let history = if walls.springs(w) {
                 std::mem::take(&mut wall_history[w])
             } else {
                 0.0
             };
             // Most grains are far from every wall: skip the call.
-            if !near_wall[w] || wall.height(frame.center) >= frame.bounding_radius {
+            if !walls.near(w) || wall.height(frame.center) >= frame.bounding_radius {
                 continue;
             }
             let overlap = if frame.circle {
@@ -774,8 +766,8 @@ pub(super) struct GrainChunk<'a> {
 /// first reads here were a tenth of the rigid grain pass at 10⁵ grains, a stream of 128-byte
 /// frames in a loop with nothing else to do, where the grain loop that reads them next
 /// overlaps that stream with its work.
-fn walls_in_reach(centers: &[DVec2], reach: &[f64], walls: &[Wall]) -> [bool; MAX_WALLS] {
-    let mut near = [false; MAX_WALLS];
+fn walls_in_reach(centers: &[DVec2], reach: &[f64], walls: &[Wall]) -> u32 {
+    let mut near = 0;
     if walls.is_empty() || centers.is_empty() {
         return near;
     }
@@ -789,10 +781,35 @@ fn walls_in_reach(centers: &[DVec2], reach: &[f64], walls: &[Wall]) -> [bool; MA
         hi = hi.max(center + reach);
         sum += center.x + center.y + radius;
     }
-    for (near, wall) in near.iter_mut().zip(walls) {
-        *near = !sum.is_finite() || !wall.clears_box(lo, hi);
+    for (w, wall) in walls.iter().enumerate() {
+        near |= ((!sum.is_finite() || !wall.clears_box(lo, hi)) as u32) << w;
     }
     near
+}
+
+/// The walls a chunk's grains visit, bit `w` for wall `w` of `walls`: those within reach of
+/// the chunk (`near`, [`walls_in_reach`]), and those with friction (`springs`), which drop
+/// the springs of grains they no longer touch. A chunk clear of every wall of a box without
+/// friction visits none; one beside a wall visits that one only.
+#[derive(Clone, Copy)]
+struct ChunkWalls<'a> {
+    walls: &'a [Wall],
+    near: u32,
+    springs: u32,
+}
+
+impl ChunkWalls<'_> {
+    /// Whether wall `w` lies within the chunk's reach.
+    #[inline(always)]
+    fn near(self, w: usize) -> bool {
+        self.near & (1 << w) != 0
+    }
+
+    /// Whether wall `w` has friction.
+    #[inline(always)]
+    fn springs(self, w: usize) -> bool {
+        self.springs & (1 << w) != 0
+    }
 }
 
 /// The [principal directions](Grain::principal_direction) of a chunk's grains (at most

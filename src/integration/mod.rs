@@ -1098,9 +1098,10 @@ impl World {
                 frictional_pairs: params.frictional_pairs(),
                 cell,
                 walls,
-                wall_friction,
                 // A frictional wall drops the springs of the grains it no longer touches.
-                wall_springs: (0..walls.len()).any(|w| wall_friction[w] > 0.0),
+                wall_springs: (0..walls.len())
+                    .filter(|&w| wall_friction[w] > 0.0)
+                    .fold(0, |bits, w| bits | (1 << w)),
                 // The affine carry is applied to each grain right after its update, where the
                 // pass has the grain at hand (a pass of its own after the step cost some 4% of
                 // a 10⁵-grain run).
