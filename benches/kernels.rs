@@ -383,7 +383,7 @@ mod disc_pairs {
 }
 
 /// The polygon contact's common path eight pairs at a time (`grain_grain_blocks`, by each
-/// kernel the processor runs: pairs of AVX registers, AVX-512) against the one-pair path four
+/// kernel the processor runs: AVX a block at a time, AVX-512) against the one-pair path four
 /// times, on four pairs (twice over in the eight lanes) at depths 0.01 to 0.15 of a diameter
 /// whose j moves back and forth by a tenth of a node spacing along the line of centres from
 /// call to call (a contact under load from step to step; a dense step moves a grain by far
@@ -419,7 +419,7 @@ mod polygon_lanes {
             .find(|k| k.name() == name)
     }
 
-    #[divan::bench(args = ["two AVX registers", "AVX-512"])]
+    #[divan::bench(args = ["AVX", "AVX-512"])]
     fn eight_in_lanes(bencher: divan::Bencher, name: &str) {
         let Some(kernel) = kernel(name) else {
             return;

@@ -1,14 +1,14 @@
-//! The common path of [`grain_grain_hinted`] for eight pairs side by side, in AVX-512
-//! registers or in pairs of AVX ones (issue #16): two contours that were in contact last step,
+//! The common path of [`grain_grain_hinted`] for eight pairs at a call, in AVX-512 registers
+//! or four at a time in AVX ones (issue #16): two contours that were in contact last step,
 //! whose chains' ends moved by at most one node and whose crossings lie on, or next to, the
 //! edges of j they lay on last step.
 //!
 //! Nearly every contact of a dense packing takes that path every step, and one pair at a time
 //! it is a long chain of dependent loads, products and branches. Here its arithmetic runs in
 //! the lanes of vectors, each lane's choices made by masks and blends; the kernel is written
-//! once (`kernel`, over a width's lanes) for four lanes (`avx`), eight in pairs of them
-//! (`avx_pair`) and eight in AVX-512 registers (`avx512`). The chain, not the arithmetic,
-//! bounds its time, so that eight lanes compute two blocks in about one's time. Every quantity
+//! once (`kernel`, over a width's lanes) for four lanes in AVX registers (`avx`) and eight in
+//! AVX-512 ones (`avx512`). The chain, not the arithmetic, bounds its time, so that eight
+//! lanes compute two blocks in about one's time. Every quantity
 //! is computed with the operations of the one-pair path, in its order (products and sums as
 //! glam computes them), so that a lane gives that path's bits; a lane that would leave the path
 //! (an end that moved further, a node in the thin ring where the inside test needs its sector,
@@ -160,15 +160,15 @@ pub const PAIRS: usize = 2 * BLOCK;
 /// The blocks of a call of [`grain_grain_blocks`].
 pub const BLOCKS: usize = PAIRS / BLOCK;
 
-/// How [`grain_grain_blocks`] computes its eight lanes: in pairs of AVX registers, or in
-/// AVX-512 ones. Made only by [`available`](Self::available) and [`best`](Self::best), so that
+/// How [`grain_grain_blocks`] computes its eight lanes: a block at a time in AVX registers,
+/// or both at once in AVX-512 ones. Made only by [`available`](Self::available) and [`best`](Self::best), so that
 /// a kernel in hand runs on this processor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BlockKernel(Width);
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Width {
-    TwoAvx,
+    Avx,
     Avx512,
 }
 
@@ -179,7 +179,7 @@ impl BlockKernel {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx") {
-                kernels.push(BlockKernel(Width::TwoAvx));
+                kernels.push(BlockKernel(Width::Avx));
             }
             if avx512::available() {
                 kernels.push(BlockKernel(Width::Avx512));
@@ -197,7 +197,7 @@ impl BlockKernel {
     /// The kernel's name, as benches and notes give it.
     pub fn name(self) -> &'static str {
         match self.0 {
-            Width::TwoAvx => "two AVX registers",
+            Width::Avx => "AVX",
             Width::Avx512 => "AVX-512",
         }
     }
@@ -223,9 +223,7 @@ pub fn grain_grain_blocks(
     #[cfg(target_arch = "x86_64")]
     match kernel.0 {
         // SAFETY: a kernel is made only where the processor runs it (`BlockKernel::available`).
-        Width::TwoAvx => unsafe {
-            avx_pair::grain_grain_blocks(table, pairs, shifted, filled, contacts)
-        },
+        Width::Avx => unsafe { avx::grain_grain_blocks(table, pairs, shifted, filled, contacts) },
         Width::Avx512 => unsafe { avx512::grain_grain_blocks(table, pairs, shifted, contacts) },
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -243,9 +241,6 @@ mod avx;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
-
-#[cfg(target_arch = "x86_64")]
-mod avx_pair;
 
 #[cfg(test)]
 mod tests {
@@ -298,7 +293,7 @@ mod tests {
     fn lanes_give_the_one_pair_paths_contact_and_hint_bit_for_bit() {
         // Expectation: a lane on the common path returns exactly what `grain_grain_hinted`
         // returns for its pair from the same hint (contact and next hint), whatever the lane,
-        // the pairs beside it and the kernel (AVX-512 or pairs of AVX registers, each where
+        // the pairs beside it and the kernel (AVX-512 or AVX, each where
         // the processor runs it); and most pairs a step after a contact take that path.
         if BlockKernel::available().is_empty() {
             return;

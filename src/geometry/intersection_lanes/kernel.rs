@@ -1,6 +1,6 @@
 //! The common path's arithmetic, written once over [`Wide`]: lanes of `f64`s and of node
-//! indices, eight in pairs of AVX registers ([`super::avx_pair`], over [`super::avx`]'s four)
-//! or in AVX-512 ones ([`super::avx512`]). Every lane computes with the operations of the
+//! indices, four in AVX registers ([`super::avx`]) or eight in AVX-512 ones
+//! ([`super::avx512`]). Every lane computes with the operations of the
 //! one-pair path, in its order, whichever the registers: the kernels give the same bits.
 
 use super::{BLOCK, BlockContacts, LanePair};
