@@ -2,11 +2,11 @@
 //! (SSE4.1, which AVX implies), lanes' selections by sign bits ([`SignMask`]); a call's two
 //! blocks one after the other ([`grain_grain_blocks`]).
 
-use super::kernel::{Bits, V2, Wide};
+use super::kernel::{Bits, V2, Wide, selection_ops};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair, PAIRS};
 use crate::geometry::intersection::PairHint;
 use std::arch::x86_64::*;
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
+use std::ops::{Add, Div, Mul, Sub};
 
 /// Four `f64` lanes.
 #[derive(Clone, Copy)]
@@ -20,33 +20,16 @@ pub(super) struct Avx(__m256d);
 #[derive(Clone, Copy)]
 pub(super) struct SignMask(__m256d);
 
-impl BitAnd for SignMask {
-    type Output = SignMask;
-    #[inline(always)]
-    fn bitand(self, other: SignMask) -> SignMask {
-        // SAFETY: `SignMask`s exist only inside a kernel compiled for AVX.
-        SignMask(unsafe { _mm256_and_pd(self.0, other.0) })
-    }
-}
-
-impl BitOr for SignMask {
-    type Output = SignMask;
-    #[inline(always)]
-    fn bitor(self, other: SignMask) -> SignMask {
-        // SAFETY: as `bitand`.
-        SignMask(unsafe { _mm256_or_pd(self.0, other.0) })
-    }
-}
-
-impl Not for SignMask {
-    type Output = SignMask;
-    /// (An exclusive or with all ones, which an `and` after it folds into `andnpd`.)
-    #[inline(always)]
-    fn not(self) -> SignMask {
-        // SAFETY: as `bitand`.
-        SignMask(unsafe { _mm256_xor_pd(self.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) })
-    }
-}
+// SAFETY: `SignMask`s exist only inside a kernel compiled for AVX. `!` is an exclusive or with
+// all ones, which an `and` after it folds into `andnpd`.
+selection_ops!(
+    SignMask,
+    a,
+    b,
+    and: SignMask(unsafe { _mm256_and_pd(a.0, b.0) }),
+    or: SignMask(unsafe { _mm256_or_pd(a.0, b.0) }),
+    not: SignMask(unsafe { _mm256_xor_pd(a.0, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))) }),
+);
 
 impl SignMask {
     /// The selection of index lanes (`i32`s): each 64-bit lane's upper half, which holds its

@@ -4,10 +4,10 @@
 //! and eight lanes run two blocks' chains in the time of one.
 
 use super::avx::{hints4, store_hints4};
-use super::kernel::{Bits, V2, Wide};
+use super::kernel::{Bits, V2, Wide, selection_ops};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
+use std::ops::{Add, Div, Mul, Sub};
 
 /// Eight `f64` lanes.
 #[derive(Clone, Copy)]
@@ -71,29 +71,14 @@ unsafe fn points_of_rows(q01: __m512d, q23: __m512d, q45: __m512d, q67: __m512d)
 #[derive(Clone, Copy)]
 pub(super) struct Lanes(__mmask8);
 
-impl BitAnd for Lanes {
-    type Output = Lanes;
-    #[inline(always)]
-    fn bitand(self, other: Lanes) -> Lanes {
-        Lanes(self.0 & other.0)
-    }
-}
-
-impl BitOr for Lanes {
-    type Output = Lanes;
-    #[inline(always)]
-    fn bitor(self, other: Lanes) -> Lanes {
-        Lanes(self.0 | other.0)
-    }
-}
-
-impl Not for Lanes {
-    type Output = Lanes;
-    #[inline(always)]
-    fn not(self) -> Lanes {
-        Lanes(!self.0)
-    }
-}
+selection_ops!(
+    Lanes,
+    a,
+    b,
+    and: Lanes(a.0 & b.0),
+    or: Lanes(a.0 | b.0),
+    not: Lanes(!a.0),
+);
 
 /// A comparison of lanes.
 macro_rules! compare {

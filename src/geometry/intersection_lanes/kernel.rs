@@ -107,6 +107,35 @@ pub(super) unsafe trait Wide:
     unsafe fn store_hints(rows: [Self::I; 4], out: &mut [BlockContacts]);
 }
 
+/// `&`, `|` and `!` of a width's selections of lanes ([`Wide::B`]) `$ty`: each the expression
+/// given, of `$a` (and `$b`). Expressions, not closures: a closure is not compiled for the
+/// kernel's instructions, and its intrinsics would stay calls.
+macro_rules! selection_ops {
+    ($ty:ident, $a:ident, $b:ident, and: $and:expr, or: $or:expr, not: $not:expr $(,)?) => {
+        selection_ops!(@binary $ty, BitAnd, bitand, $a, $b, $and);
+        selection_ops!(@binary $ty, BitOr, bitor, $a, $b, $or);
+        impl std::ops::Not for $ty {
+            type Output = $ty;
+            #[inline(always)]
+            fn not(self) -> $ty {
+                let $a = self;
+                $not
+            }
+        }
+    };
+    (@binary $ty:ident, $trait:ident, $method:ident, $a:ident, $b:ident, $body:expr) => {
+        impl std::ops::$trait for $ty {
+            type Output = $ty;
+            #[inline(always)]
+            fn $method(self, $b: $ty) -> $ty {
+                let $a = self;
+                $body
+            }
+        }
+    };
+}
+pub(super) use selection_ops;
+
 /// A point of lanes.
 #[derive(Clone, Copy)]
 pub(super) struct V2<V> {
