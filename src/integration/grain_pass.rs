@@ -304,6 +304,15 @@ impl GrainPass<'_> {
         let grains_at = chunk.grains.as_ptr();
         let stresses_at = chunk.stresses.as_ptr();
         let mut done = 0;
+        // A block's pair loads in lanes ([`GrainPass::pair_loads_avx`]): without friction
+        // (whose tangential forces the lanes leave out) and outside a periodic cell (whose
+        // ends need their images).
+        #[cfg(target_arch = "x86_64")]
+        let lanes_gather = !self.frictional_pairs
+            && self.cell.is_none()
+            && std::arch::is_x86_feature_detected!("avx");
+        #[cfg(not(target_arch = "x86_64"))]
+        let lanes_gather = false;
         for start in (0..n).step_by(BLOCK_GRAINS) {
             let block = start..(start + BLOCK_GRAINS).min(n);
             // The states of the grains ahead, and the stress records they will write, as one by
@@ -354,24 +363,59 @@ impl GrainPass<'_> {
             // The block's first wall failure and its grain: a later one would never be kept.
             let mut wall_failure = None;
             let mut wall_failure_lane = BLOCK_GRAINS;
-            for (l, lane_contacts) in contacts.iter_mut().enumerate() {
-                let (k, g) = (start + l, first + start + l);
-                let frame = &chunk.frames[k];
-                let load = self.contact_load(
-                    g,
-                    frame,
-                    Turn::Plain,
-                    self.dt,
-                    chunk_walls,
-                    &mut chunk.wall_histories[k],
-                    &mut sums.totals,
-                    &mut wall_failure,
-                );
-                if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
-                    wall_failure_lane = l;
+            if lanes_gather {
+                // SAFETY: `lanes_gather` holds only where the processor has AVX.
+                #[cfg(target_arch = "x86_64")]
+                let pair_contacts = unsafe {
+                    self.pair_loads_avx(first + start, &chunk.frames[block.clone()], &mut loads)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let pair_contacts: [u32; BLOCK_GRAINS] = unreachable!();
+                for (l, lane_contacts) in contacts.iter_mut().enumerate() {
+                    lane_contacts[0] = pair_contacts[l];
                 }
-                loads.set_lane(l, &load);
-                *lane_contacts = [load.contacts, load.wall_contacts];
+                if chunk_walls.visits_any() {
+                    for (l, lane_contacts) in contacts.iter_mut().enumerate() {
+                        let (k, g) = (start + l, first + start + l);
+                        let mut load = loads.lane(l, pair_contacts[l]);
+                        self.add_wall_loads(
+                            g,
+                            &chunk.frames[k],
+                            Turn::Plain,
+                            self.dt,
+                            chunk_walls,
+                            &mut chunk.wall_histories[k],
+                            &mut sums.totals,
+                            &mut wall_failure,
+                            &mut load,
+                        );
+                        if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
+                            wall_failure_lane = l;
+                        }
+                        loads.set_lane(l, &load);
+                        *lane_contacts = [load.contacts, load.wall_contacts];
+                    }
+                }
+            } else {
+                for (l, lane_contacts) in contacts.iter_mut().enumerate() {
+                    let (k, g) = (start + l, first + start + l);
+                    let frame = &chunk.frames[k];
+                    let load = self.contact_load(
+                        g,
+                        frame,
+                        Turn::Plain,
+                        self.dt,
+                        chunk_walls,
+                        &mut chunk.wall_histories[k],
+                        &mut sums.totals,
+                        &mut wall_failure,
+                    );
+                    if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
+                        wall_failure_lane = l;
+                    }
+                    loads.set_lane(l, &load);
+                    *lane_contacts = [load.contacts, load.wall_contacts];
+                }
             }
             let outcome = if rigid {
                 let outcome = advance_rigid_block(
@@ -478,6 +522,177 @@ impl GrainPass<'_> {
         } else {
             self.pair_load::<false>(g, frame)
         };
+        self.add_wall_loads(
+            g,
+            frame,
+            turn,
+            dt,
+            walls,
+            wall_history,
+            totals,
+            failure,
+            &mut load,
+        );
+        load
+    }
+
+    /// [`pair_load`](Self::pair_load) without friction of the four grains `g..g + 4`
+    /// (`frames`: theirs) side by side in AVX lanes, into `loads`; returns their counts of
+    /// contacts. Lane `l` sums grain `g + l`'s second ends, then its first ones, with
+    /// `pair_load`'s operations in its order, so that its sums are `pair_load`'s bits; a lane
+    /// past its grain's last end of a kind adds an open pair's zeros, which leave its sums as
+    /// they are (see [`contact_or_none`]). Outside a periodic cell only (a second end's image
+    /// shift is taken as zero).
+    ///
+    /// # Safety
+    /// The processor has AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn pair_loads_avx(
+        &self,
+        g: usize,
+        frames: &[Frame],
+        loads: &mut BlockLoads,
+    ) -> [u32; BLOCK_GRAINS] {
+        use std::arch::x86_64::*;
+        assert!(frames.len() == BLOCK_GRAINS);
+        let pairs = self.neighbors.pairs.len();
+        assert!(self.pair_active.len() == pairs && self.pair_contacts.len() == pairs);
+        let ends: [_; BLOCK_GRAINS] = std::array::from_fn(|l| self.neighbors.ends_of(g + l));
+        // SAFETY: the processor has AVX (the caller's promise); the ends index the list's
+        // pairs, as many as the flags and records (asserted above).
+        unsafe {
+            let center = |axis: usize| {
+                _mm256_setr_pd(
+                    frames[0].center[axis],
+                    frames[1].center[axis],
+                    frames[2].center[axis],
+                    frames[3].center[axis],
+                )
+            };
+            let zero = _mm256_setzero_pd();
+            let mut sums = LaneLoads {
+                force: [zero; 2],
+                torque: zero,
+                moment: [[zero; 2]; 2],
+                lost_area: zero,
+                contacts: [0; BLOCK_GRAINS],
+            };
+            // `pair_load`'s centre of a second end is `center + image`, the image zero here.
+            let center = [center(0), center(1)];
+            let image_center = center.map(|c| _mm256_add_pd(c, zero));
+            self.add_ends_avx::<true>(
+                ends.each_ref().map(|(second, _)| second.len()),
+                |l, k| *ends[l].0.get_unchecked(k) as usize,
+                image_center,
+                &mut sums,
+            );
+            self.add_ends_avx::<false>(
+                ends.each_ref().map(|(_, first)| first.len()),
+                |l, k| ends[l].1.start + k,
+                center,
+                &mut sums,
+            );
+            let store =
+                |to: &mut Lanes<BLOCK_GRAINS>, v: __m256d| _mm256_storeu_pd(to.0.as_mut_ptr(), v);
+            store(&mut loads.force[0], sums.force[0]);
+            store(&mut loads.force[1], sums.force[1]);
+            store(&mut loads.torque, sums.torque);
+            for (to, from) in loads.moment.iter_mut().zip(sums.moment) {
+                store(&mut to[0], from[0]);
+                store(&mut to[1], from[1]);
+            }
+            store(&mut loads.lost_area, sums.lost_area);
+            sums.contacts
+        }
+    }
+
+    /// Adds to `sums` the ends of one kind (`SECOND`: the pairs `[i, g]`, whose force on g is
+    /// the opposite of the first grain's; else the pairs `[g, j]`) of a block's grains, the
+    /// `count[l]` ends of lane `l` being the pairs `pair(l, k)`, at the arms from `center`
+    /// (see [`pair_loads_avx`](Self::pair_loads_avx)).
+    ///
+    /// # Safety
+    /// The processor has AVX, and every `pair(l, k)` with `k < count[l]` indexes the list's
+    /// flags and records.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    unsafe fn add_ends_avx<const SECOND: bool>(
+        &self,
+        count: [usize; BLOCK_GRAINS],
+        pair: impl Fn(usize, usize) -> usize,
+        center: [std::arch::x86_64::__m256d; 2],
+        sums: &mut LaneLoads,
+    ) {
+        use crate::lanes::avx::transpose;
+        use std::arch::x86_64::*;
+        let longest = count.iter().copied().max().unwrap_or(0);
+        // SAFETY: as the function's; every load reads four f64s of a 64-byte aligned record.
+        unsafe {
+            let flip = _mm256_set1_pd(if SECOND { -0.0 } else { 0.0 });
+            for k in 0..longest {
+                let records: [&PairContact; BLOCK_GRAINS] = std::array::from_fn(|l| {
+                    if k < count[l] {
+                        let pair = pair(l, k);
+                        let active = *self.pair_active.row_unchecked(pair);
+                        sums.contacts[l] += active as u32;
+                        contact_or_none(active, self.pair_contacts.row_unchecked(pair))
+                    } else {
+                        &NO_CONTACT
+                    }
+                });
+                let words = records.map(|r| (r as *const PairContact).cast::<f64>());
+                let [normal_x, normal_y, normal_force, _] =
+                    transpose(words.map(|w| _mm256_load_pd(w)));
+                let [point_x, point_y, cap_first, cap_second] =
+                    transpose(words.map(|w| _mm256_load_pd(w.add(4))));
+                // The force on the grain (on a second end, the opposite of the first's).
+                let f = [
+                    _mm256_xor_pd(_mm256_mul_pd(normal_force, normal_x), flip),
+                    _mm256_xor_pd(_mm256_mul_pd(normal_force, normal_y), flip),
+                ];
+                let arm = [
+                    _mm256_sub_pd(point_x, center[0]),
+                    _mm256_sub_pd(point_y, center[1]),
+                ];
+                sums.force = [
+                    _mm256_add_pd(sums.force[0], f[0]),
+                    _mm256_add_pd(sums.force[1], f[1]),
+                ];
+                // glam's `arm.perp_dot(f)`: (arm.x f.y) - (arm.y f.x).
+                sums.torque = _mm256_add_pd(
+                    sums.torque,
+                    _mm256_sub_pd(_mm256_mul_pd(arm[0], f[1]), _mm256_mul_pd(arm[1], f[0])),
+                );
+                // Column b of `f (x) arm` is `f arm_b`.
+                for (column, arm) in sums.moment.iter_mut().zip(arm) {
+                    for (entry, f) in column.iter_mut().zip(f) {
+                        *entry = _mm256_add_pd(*entry, _mm256_mul_pd(f, arm));
+                    }
+                }
+                let cap = if SECOND { cap_second } else { cap_first };
+                sums.lost_area = _mm256_add_pd(sums.lost_area, cap);
+            }
+        }
+    }
+
+    /// Adds to `load` (grain `g`'s pair forces) the forces of the walls its chunk reaches
+    /// (`walls`), as [`contact_load`](Self::contact_load) does.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn add_wall_loads(
+        &self,
+        g: usize,
+        frame: &Frame,
+        turn: Turn,
+        dt: f64,
+        walls: ChunkWalls<'_>,
+        wall_history: &mut [f64; MAX_WALLS],
+        totals: &mut StepTotals,
+        failure: &mut Option<Instability>,
+        load: &mut ContactLoad,
+    ) {
         let (params, step, tallied) = (self.params, self.step, turn.tallied());
         // In the walls' order, as the totals take their forces.
         let mut visit = walls.near | walls.springs;
@@ -562,7 +777,6 @@ impl GrainPass<'_> {
                 },
             }
         }
-        load
     }
 
     /// Moves an updated grain with its box: the affine carry of a box of walls, or a periodic
@@ -799,6 +1013,12 @@ struct ChunkWalls<'a> {
 }
 
 impl ChunkWalls<'_> {
+    /// Whether the chunk's grains visit any wall.
+    #[inline(always)]
+    fn visits_any(self) -> bool {
+        self.near | self.springs != 0
+    }
+
     /// Whether wall `w` lies within the chunk's reach.
     #[inline(always)]
     fn near(self, w: usize) -> bool {
@@ -930,6 +1150,18 @@ fn prefetch_grain(grains: *const Grain, k: usize) {
     prefetch_address(grain.wrapping_add(64));
 }
 
+/// [`ContactLoad`]'s sums of a block's four grains in AVX lanes (lane `l`: grain `l`), as
+/// [`GrainPass::pair_loads_avx`] adds them up.
+#[cfg(target_arch = "x86_64")]
+struct LaneLoads {
+    force: [std::arch::x86_64::__m256d; 2],
+    torque: std::arch::x86_64::__m256d,
+    /// `moment[b][a]`: `f_a r_b`.
+    moment: [[std::arch::x86_64::__m256d; 2]; 2],
+    lost_area: std::arch::x86_64::__m256d,
+    contacts: [u32; BLOCK_GRAINS],
+}
+
 /// The sums a grain needs from its contacts.
 #[derive(Debug, Clone, Copy)]
 struct ContactLoad {
@@ -967,6 +1199,22 @@ impl ContactLoad {
 }
 
 impl BlockLoads {
+    /// The load in lane `l`, with its grain's `contacts` (and no walls').
+    #[inline(always)]
+    fn lane(&self, l: usize, contacts: u32) -> ContactLoad {
+        ContactLoad {
+            force: DVec2::new(self.force[0].0[l], self.force[1].0[l]),
+            torque: self.torque.0[l],
+            moment: DMat2::from_cols(
+                DVec2::new(self.moment[0][0].0[l], self.moment[0][1].0[l]),
+                DVec2::new(self.moment[1][0].0[l], self.moment[1][1].0[l]),
+            ),
+            lost_area: self.lost_area.0[l],
+            contacts,
+            wall_contacts: 0,
+        }
+    }
+
     /// Puts a grain's load in lane `l`.
     #[inline(always)]
     fn set_lane(&mut self, l: usize, load: &ContactLoad) {

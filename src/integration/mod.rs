@@ -1662,7 +1662,10 @@ mod tests {
     #[test]
     fn the_grain_pass_by_blocks_changes_no_bit() {
         // Expectation: a block's lanes are its grains' one-grain updates (a unit test of
-        // grain_pass compares them), and the pass around them keeps every order: a world
+        // grain_pass compares them), its pair loads gathered in lanes are `pair_load`'s sums
+        // (in the cases without friction outside a cell; it fails when a second end's force
+        // keeps the first's sign, or an arm takes the wrong coordinate: both checked), and
+        // the pass around them keeps every order: a world
         // stepped with blocks is, bit for bit, the world stepped grain by grain (grains,
         // stress records, totals, frames, the pair records), in a box squeezed with the affine
         // carry, with friction, in a sheared periodic cell, with adaptive levels stepping down
