@@ -245,6 +245,7 @@ impl GrainPass<'_> {
             wall_history,
             &mut sums.totals,
             &mut sums.failure,
+            None,
         );
         let update = advance_grain(
             self.params,
@@ -362,61 +363,44 @@ impl GrainPass<'_> {
             let mut contacts = [[0u32; 2]; BLOCK_GRAINS];
             // The block's first wall failure and its grain: a later one would never be kept.
             let mut wall_failure = None;
-            let mut wall_failure_lane = BLOCK_GRAINS;
-            if lanes_gather {
-                // SAFETY: `lanes_gather` holds only where the processor has AVX.
-                #[cfg(target_arch = "x86_64")]
-                let pair_contacts = unsafe {
-                    self.pair_loads_avx(first + start, &chunk.frames[block.clone()], &mut loads)
-                };
-                #[cfg(not(target_arch = "x86_64"))]
-                let pair_contacts: [u32; BLOCK_GRAINS] = unreachable!();
-                for (l, lane_contacts) in contacts.iter_mut().enumerate() {
-                    lane_contacts[0] = pair_contacts[l];
-                }
-                if chunk_walls.visits_any() {
-                    for (l, lane_contacts) in contacts.iter_mut().enumerate() {
-                        let (k, g) = (start + l, first + start + l);
-                        let mut load = loads.lane(l, pair_contacts[l]);
-                        self.add_wall_loads(
-                            g,
-                            &chunk.frames[k],
-                            Turn::Plain,
-                            self.dt,
-                            chunk_walls,
-                            &mut chunk.wall_histories[k],
-                            &mut sums.totals,
-                            &mut wall_failure,
-                            &mut load,
-                        );
-                        if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
-                            wall_failure_lane = l;
-                        }
-                        loads.set_lane(l, &load);
-                        *lane_contacts = [load.contacts, load.wall_contacts];
+            // SAFETY: `lanes_gather` holds only where the processor has AVX.
+            #[cfg(target_arch = "x86_64")]
+            let gathered = lanes_gather.then(|| unsafe {
+                self.pair_loads_avx(first + start, &chunk.frames[block.clone()], &mut loads)
+            });
+            #[cfg(not(target_arch = "x86_64"))]
+            let gathered: Option<[u32; BLOCK_GRAINS]> = None;
+            let wall_failure_lane = match gathered {
+                // Clear of the walls, the gathered pair loads are the grains' loads.
+                Some(pair_contacts) if !chunk_walls.visits_any() => {
+                    for (lane_contacts, pair_contacts) in contacts.iter_mut().zip(pair_contacts) {
+                        lane_contacts[0] = pair_contacts;
                     }
+                    BLOCK_GRAINS
                 }
-            } else {
-                for (l, lane_contacts) in contacts.iter_mut().enumerate() {
-                    let (k, g) = (start + l, first + start + l);
-                    let frame = &chunk.frames[k];
-                    let load = self.contact_load(
-                        g,
-                        frame,
-                        Turn::Plain,
-                        self.dt,
-                        chunk_walls,
-                        &mut chunk.wall_histories[k],
-                        &mut sums.totals,
-                        &mut wall_failure,
-                    );
-                    if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
-                        wall_failure_lane = l;
-                    }
-                    loads.set_lane(l, &load);
-                    *lane_contacts = [load.contacts, load.wall_contacts];
-                }
-            }
+                Some(pair_contacts) => self.block_contact_loads::<true>(
+                    first + start,
+                    chunk,
+                    start,
+                    chunk_walls,
+                    pair_contacts,
+                    &mut loads,
+                    &mut contacts,
+                    sums,
+                    &mut wall_failure,
+                ),
+                None => self.block_contact_loads::<false>(
+                    first + start,
+                    chunk,
+                    start,
+                    chunk_walls,
+                    [0; BLOCK_GRAINS],
+                    &mut loads,
+                    &mut contacts,
+                    sums,
+                    &mut wall_failure,
+                ),
+            };
             let outcome = if rigid {
                 let outcome = advance_rigid_block(
                     &mut chunk.grains[block.clone()],
@@ -499,41 +483,6 @@ impl GrainPass<'_> {
             }
         }
         done
-    }
-
-    /// The contact load of grain `g` (`frame`: the grain at the start of the step): its pairs'
-    /// forces, then those of the walls its chunk reaches (`walls`). The walls' forces and counts go to `totals` too, and the grain's first
-    /// failure to `failure`.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn contact_load(
-        &self,
-        g: usize,
-        frame: &Frame,
-        turn: Turn,
-        dt: f64,
-        walls: ChunkWalls<'_>,
-        wall_history: &mut [f64; MAX_WALLS],
-        totals: &mut StepTotals,
-        failure: &mut Option<Instability>,
-    ) -> ContactLoad {
-        let mut load = if self.frictional_pairs {
-            self.pair_load::<true>(g, frame)
-        } else {
-            self.pair_load::<false>(g, frame)
-        };
-        self.add_wall_loads(
-            g,
-            frame,
-            turn,
-            dt,
-            walls,
-            wall_history,
-            totals,
-            failure,
-            &mut load,
-        );
-        load
     }
 
     /// [`pair_load`](Self::pair_load) without friction of the four grains `g..g + 4`
@@ -677,11 +626,54 @@ impl GrainPass<'_> {
         }
     }
 
-    /// Adds to `load` (grain `g`'s pair forces) the forces of the walls its chunk reaches
-    /// (`walls`), as [`contact_load`](Self::contact_load) does.
+    /// The contact loads of the block of grains `g..g + 4`, the chunk's `k..k + 4`, into
+    /// `loads` and `contacts`, the block's first wall failure to `wall_failure`; returns its
+    /// lane ([`BLOCK_GRAINS`] for none). `GATHERED`: `loads` holds the grains' pair loads
+    /// already ([`GrainPass::pair_loads_avx`], with their counts `pair_contacts`), to which
+    /// the walls' are added.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn add_wall_loads(
+    fn block_contact_loads<const GATHERED: bool>(
+        &self,
+        g: usize,
+        chunk: &mut GrainChunk<'_>,
+        k: usize,
+        chunk_walls: ChunkWalls<'_>,
+        pair_contacts: [u32; BLOCK_GRAINS],
+        loads: &mut BlockLoads,
+        contacts: &mut [[u32; 2]; BLOCK_GRAINS],
+        sums: &mut ChunkSums,
+        wall_failure: &mut Option<Instability>,
+    ) -> usize {
+        let mut wall_failure_lane = BLOCK_GRAINS;
+        for (l, lane_contacts) in contacts.iter_mut().enumerate() {
+            let load = self.contact_load(
+                g + l,
+                &chunk.frames[k + l],
+                Turn::Plain,
+                self.dt,
+                chunk_walls,
+                &mut chunk.wall_histories[k + l],
+                &mut sums.totals,
+                wall_failure,
+                GATHERED.then(|| loads.lane(l, pair_contacts[l])),
+            );
+            if wall_failure.is_some() && wall_failure_lane == BLOCK_GRAINS {
+                wall_failure_lane = l;
+            }
+            loads.set_lane(l, &load);
+            *lane_contacts = [load.contacts, load.wall_contacts];
+        }
+        wall_failure_lane
+    }
+
+    /// The contact load of grain `g` (`frame`: the grain at the start of the step): its pairs'
+    /// forces (`pairs`, where a block gathered them, else [`pair_load`](Self::pair_load)'s),
+    /// then those of the walls its chunk reaches (`walls`). The walls' forces and counts go to
+    /// `totals` too, and the grain's first failure to `failure`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn contact_load(
         &self,
         g: usize,
         frame: &Frame,
@@ -691,8 +683,15 @@ impl GrainPass<'_> {
         wall_history: &mut [f64; MAX_WALLS],
         totals: &mut StepTotals,
         failure: &mut Option<Instability>,
-        load: &mut ContactLoad,
-    ) {
+        pairs: Option<ContactLoad>,
+    ) -> ContactLoad {
+        let mut load = pairs.unwrap_or_else(|| {
+            if self.frictional_pairs {
+                self.pair_load::<true>(g, frame)
+            } else {
+                self.pair_load::<false>(g, frame)
+            }
+        });
         let (params, step, tallied) = (self.params, self.step, turn.tallied());
         // In the walls' order, as the totals take their forces.
         let mut visit = walls.near | walls.springs;
@@ -777,6 +776,7 @@ impl GrainPass<'_> {
                 },
             }
         }
+        load
     }
 
     /// Moves an updated grain with its box: the affine carry of a box of walls, or a periodic
