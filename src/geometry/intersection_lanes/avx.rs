@@ -2,11 +2,12 @@
 //! (SSE4.1, which AVX implies), lanes' selections by sign bits ([`SignMask`]); a call's two
 //! blocks one after the other ([`grain_grain_blocks`]).
 
-use super::kernel::{Bits, V2, Wide, selection_ops};
+use super::kernel::{
+    Bits, V2, Wide, index_operations, lane_arithmetic, lane_comparisons, selection_ops,
+};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair, PAIRS};
 use crate::geometry::intersection::PairHint;
 use std::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Sub};
 
 /// Four `f64` lanes.
 #[derive(Clone, Copy)]
@@ -113,42 +114,8 @@ pub(super) unsafe fn store_hints4(rows: [__m128i; 4], out: &mut BlockContacts) {
     }
 }
 
-macro_rules! arithmetic {
-    ($trait:ident, $method:ident, $intrinsic:ident) => {
-        impl $trait for Avx {
-            type Output = Avx;
-            #[inline(always)]
-            fn $method(self, other: Avx) -> Avx {
-                // SAFETY: `Avx` lanes exist only inside a kernel compiled for AVX.
-                Avx(unsafe { $intrinsic(self.0, other.0) })
-            }
-        }
-    };
-}
-arithmetic!(Add, add, _mm256_add_pd);
-arithmetic!(Sub, sub, _mm256_sub_pd);
-arithmetic!(Mul, mul, _mm256_mul_pd);
-arithmetic!(Div, div, _mm256_div_pd);
-
-/// A comparison of lanes.
-macro_rules! compare {
-    ($method:ident, $predicate:ident) => {
-        #[inline(always)]
-        unsafe fn $method(self, other: Self) -> SignMask {
-            unsafe { SignMask(_mm256_cmp_pd::<$predicate>(self.0, other.0)) }
-        }
-    };
-}
-
-/// An operation on two index lanes.
-macro_rules! binary_i {
-    ($method:ident, $intrinsic:ident) => {
-        #[inline(always)]
-        unsafe fn $method(a: __m128i, b: __m128i) -> __m128i {
-            unsafe { $intrinsic(a, b) }
-        }
-    };
-}
+lane_arithmetic!(Avx: Add add _mm256_add_pd, Sub sub _mm256_sub_pd, Mul mul _mm256_mul_pd,
+    Div div _mm256_div_pd);
 
 // SAFETY: every method runs AVX (or SSE4.1) instructions, which the kernels calling them are
 // compiled for.
@@ -188,11 +155,7 @@ unsafe impl Wide for Avx {
     unsafe fn neg(self) -> Self {
         unsafe { Avx(_mm256_xor_pd(self.0, _mm256_set1_pd(-0.0))) }
     }
-    compare!(less, _CMP_LT_OQ);
-    compare!(greater, _CMP_GT_OQ);
-    compare!(at_least, _CMP_GE_OQ);
-    compare!(at_most, _CMP_LE_OQ);
-    compare!(not_at_most, _CMP_NLE_UQ);
+    lane_comparisons!(SignMask, _mm256_cmp_pd);
     #[inline(always)]
     unsafe fn min(self, other: Self) -> Self {
         unsafe { Avx(_mm256_min_pd(self.0, other.0)) }
@@ -265,10 +228,10 @@ unsafe impl Wide for Avx {
     unsafe fn splat_i(k: i32) -> __m128i {
         unsafe { _mm_set1_epi32(k) }
     }
-    binary_i!(add_i, _mm_add_epi32);
-    binary_i!(sub_i, _mm_sub_epi32);
-    binary_i!(greater_i, _mm_cmpgt_epi32);
-    binary_i!(equal_i, _mm_cmpeq_epi32);
+    index_operations!(__m128i: add_i _mm_add_epi32, sub_i _mm_sub_epi32,
+        greater_i _mm_cmpgt_epi32, equal_i _mm_cmpeq_epi32, and_i _mm_and_si128,
+        max_unsigned_i _mm_max_epu32, min_unsigned_i _mm_min_epu32, max_i _mm_max_epi32,
+        min_i _mm_min_epi32);
     /// (-1 converts to -1.0, 0 to +0.0.)
     #[inline(always)]
     unsafe fn lanes_i(m: __m128i) -> SignMask {
@@ -292,11 +255,6 @@ unsafe impl Wide for Avx {
     unsafe fn ones_i(m: SignMask) -> __m128i {
         unsafe { _mm_srli_epi32::<31>(_mm_castps_si128(m.narrow())) }
     }
-    binary_i!(and_i, _mm_and_si128);
-    binary_i!(max_unsigned_i, _mm_max_epu32);
-    binary_i!(min_unsigned_i, _mm_min_epu32);
-    binary_i!(max_i, _mm_max_epi32);
-    binary_i!(min_i, _mm_min_epi32);
     #[inline(always)]
     unsafe fn half_i(k: __m128i) -> __m128i {
         unsafe { _mm_srai_epi32::<1>(k) }

@@ -4,31 +4,34 @@
 //! and eight lanes run two blocks' chains in the time of one.
 
 use super::avx::{hints4, store_hints4};
-use super::kernel::{Bits, V2, Wide, selection_ops};
+use super::kernel::{
+    Bits, V2, Wide, index_operations, lane_arithmetic, lane_comparisons, selection_ops,
+};
 use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
 use std::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Sub};
 
 /// Eight `f64` lanes.
 #[derive(Clone, Copy)]
 pub(super) struct Avx512(__m512d);
 
-macro_rules! arithmetic {
-    ($trait:ident, $method:ident, $intrinsic:ident) => {
-        impl $trait for Avx512 {
-            type Output = Avx512;
-            #[inline(always)]
-            fn $method(self, other: Avx512) -> Avx512 {
-                // SAFETY: `Avx512` lanes exist only inside a kernel compiled for AVX-512.
-                Avx512(unsafe { $intrinsic(self.0, other.0) })
-            }
-        }
-    };
+lane_arithmetic!(Avx512: Add add _mm512_add_pd, Sub sub _mm512_sub_pd,
+    Mul mul _mm512_mul_pd, Div div _mm512_div_pd);
+
+/// The eight lanes' pointers, `lane(0)` to `lane(7)`, taken first: no closure calls an
+/// intrinsic (a closure is not compiled for AVX-512, and its intrinsics would become calls).
+#[inline(always)]
+fn lane_pointers(lane: impl Fn(usize) -> *const f64) -> [*const f64; 8] {
+    [
+        lane(0),
+        lane(1),
+        lane(2),
+        lane(3),
+        lane(4),
+        lane(5),
+        lane(6),
+        lane(7),
+    ]
 }
-arithmetic!(Add, add, _mm512_add_pd);
-arithmetic!(Sub, sub, _mm512_sub_pd);
-arithmetic!(Mul, mul, _mm512_mul_pd);
-arithmetic!(Div, div, _mm512_div_pd);
 
 /// Two 256-bit halves as one vector, `low` in lanes 0 to 3.
 #[inline(always)]
@@ -80,26 +83,6 @@ selection_ops!(
     not: Lanes(!a.0),
 );
 
-/// A comparison of lanes.
-macro_rules! compare {
-    ($method:ident, $predicate:ident) => {
-        #[inline(always)]
-        unsafe fn $method(self, other: Self) -> Lanes {
-            unsafe { Lanes(_mm512_cmp_pd_mask::<$predicate>(self.0, other.0)) }
-        }
-    };
-}
-
-/// An operation on two index lanes.
-macro_rules! binary_i {
-    ($method:ident, $intrinsic:ident) => {
-        #[inline(always)]
-        unsafe fn $method(a: __m256i, b: __m256i) -> __m256i {
-            unsafe { $intrinsic(a, b) }
-        }
-    };
-}
-
 // SAFETY: every method runs AVX-512F, AVX-512VL or AVX2 instructions, which the kernel calling
 // them is compiled for.
 unsafe impl Wide for Avx512 {
@@ -142,11 +125,7 @@ unsafe impl Wide for Avx512 {
             )))
         }
     }
-    compare!(less, _CMP_LT_OQ);
-    compare!(greater, _CMP_GT_OQ);
-    compare!(at_least, _CMP_GE_OQ);
-    compare!(at_most, _CMP_LE_OQ);
-    compare!(not_at_most, _CMP_NLE_UQ);
+    lane_comparisons!(Lanes, _mm512_cmp_pd_mask);
     #[inline(always)]
     unsafe fn min(self, other: Self) -> Self {
         unsafe { Avx512(_mm512_min_pd(self.0, other.0)) }
@@ -188,18 +167,7 @@ unsafe impl Wide for Avx512 {
     #[inline(always)]
     unsafe fn load_points(lane: impl Fn(usize) -> *const f64) -> V2<Self> {
         unsafe {
-            // (No closure calls an intrinsic here: a closure is not compiled for AVX-512, and
-            // its intrinsics would become calls.)
-            let p = [
-                lane(0),
-                lane(1),
-                lane(2),
-                lane(3),
-                lane(4),
-                lane(5),
-                lane(6),
-                lane(7),
-            ];
+            let p = lane_pointers(lane);
             // (points 0, 2, 4, 6) and (points 1, 3, 5, 7), interleaved into x's and y's.
             let even = join(two_points(p[0], p[2]), two_points(p[4], p[6]));
             let odd = join(two_points(p[1], p[3]), two_points(p[5], p[7]));
@@ -212,16 +180,7 @@ unsafe impl Wide for Avx512 {
     #[inline(always)]
     unsafe fn load_pairs(lane: impl Fn(usize) -> *const f64) -> [V2<Self>; 2] {
         unsafe {
-            let p = [
-                lane(0),
-                lane(1),
-                lane(2),
-                lane(3),
-                lane(4),
-                lane(5),
-                lane(6),
-                lane(7),
-            ];
+            let p = lane_pointers(lane);
             // Rows l and l + 4 side by side: (x0 y0 x1 y1) of each.
             let (a, b, c, d) = (
                 join(_mm256_loadu_pd(p[0]), _mm256_loadu_pd(p[4])),
@@ -251,16 +210,7 @@ unsafe impl Wide for Avx512 {
     #[inline(always)]
     unsafe fn load_quads(lane: impl Fn(usize) -> *const f64) -> [V2<Self>; 4] {
         unsafe {
-            let p = [
-                lane(0),
-                lane(1),
-                lane(2),
-                lane(3),
-                lane(4),
-                lane(5),
-                lane(6),
-                lane(7),
-            ];
+            let p = lane_pointers(lane);
             let (r0, r1, r2, r3) = (
                 _mm512_loadu_pd(p[0]),
                 _mm512_loadu_pd(p[1]),
@@ -280,24 +230,10 @@ unsafe impl Wide for Avx512 {
             let (x67, y67) = (_mm512_unpacklo_pd(r6, r7), _mm512_unpackhi_pd(r6, r7));
             let x = points_of_rows(x01, x23, x45, x67);
             let y = points_of_rows(y01, y23, y45, y67);
-            [
-                V2 {
-                    x: Avx512(x[0]),
-                    y: Avx512(y[0]),
-                },
-                V2 {
-                    x: Avx512(x[1]),
-                    y: Avx512(y[1]),
-                },
-                V2 {
-                    x: Avx512(x[2]),
-                    y: Avx512(y[2]),
-                },
-                V2 {
-                    x: Avx512(x[3]),
-                    y: Avx512(y[3]),
-                },
-            ]
+            std::array::from_fn(|k| V2 {
+                x: Avx512(x[k]),
+                y: Avx512(y[k]),
+            })
         }
     }
 
@@ -305,8 +241,9 @@ unsafe impl Wide for Avx512 {
     unsafe fn splat_i(k: i32) -> __m256i {
         unsafe { _mm256_set1_epi32(k) }
     }
-    binary_i!(add_i, _mm256_add_epi32);
-    binary_i!(sub_i, _mm256_sub_epi32);
+    index_operations!(__m256i: add_i _mm256_add_epi32, sub_i _mm256_sub_epi32,
+        and_i _mm256_and_si256, max_unsigned_i _mm256_max_epu32,
+        min_unsigned_i _mm256_min_epu32, max_i _mm256_max_epi32, min_i _mm256_min_epi32);
     #[inline(always)]
     unsafe fn greater_i(a: __m256i, b: __m256i) -> __mmask8 {
         unsafe { _mm256_cmpgt_epi32_mask(a, b) }
@@ -331,11 +268,6 @@ unsafe impl Wide for Avx512 {
     unsafe fn ones_i(m: Lanes) -> __m256i {
         unsafe { _mm256_maskz_mov_epi32(m.0, _mm256_set1_epi32(1)) }
     }
-    binary_i!(and_i, _mm256_and_si256);
-    binary_i!(max_unsigned_i, _mm256_max_epu32);
-    binary_i!(min_unsigned_i, _mm256_min_epu32);
-    binary_i!(max_i, _mm256_max_epi32);
-    binary_i!(min_i, _mm256_min_epi32);
     #[inline(always)]
     unsafe fn half_i(k: __m256i) -> __m256i {
         unsafe { _mm256_srai_epi32::<1>(k) }

@@ -136,6 +136,54 @@ macro_rules! selection_ops {
 }
 pub(super) use selection_ops;
 
+/// `+`, `-`, `*` and `/` of a width's `f64` lanes `$ty` (its vector in field 0), each by its
+/// intrinsic: safe methods, as the lanes exist only inside a kernel compiled for the width's
+/// instructions, into which they inline.
+macro_rules! lane_arithmetic {
+    ($ty:ident: $($trait:ident $method:ident $intrinsic:ident),+ $(,)?) => {$(
+        impl std::ops::$trait for $ty {
+            type Output = $ty;
+            #[inline(always)]
+            fn $method(self, other: $ty) -> $ty {
+                // SAFETY: `$ty` lanes exist only inside a kernel compiled for their
+                // instructions.
+                $ty(unsafe { $intrinsic(self.0, other.0) })
+            }
+        }
+    )+};
+}
+pub(super) use lane_arithmetic;
+
+/// [`Wide`]'s comparisons of `f64` lanes in an impl: each `$compare::<predicate>` of the two
+/// vectors (field 0), as the selection `$selection`.
+macro_rules! lane_comparisons {
+    ($selection:ident, $compare:ident) => {
+        lane_comparisons!(@one $selection, $compare, less, _CMP_LT_OQ);
+        lane_comparisons!(@one $selection, $compare, greater, _CMP_GT_OQ);
+        lane_comparisons!(@one $selection, $compare, at_least, _CMP_GE_OQ);
+        lane_comparisons!(@one $selection, $compare, at_most, _CMP_LE_OQ);
+        lane_comparisons!(@one $selection, $compare, not_at_most, _CMP_NLE_UQ);
+    };
+    (@one $selection:ident, $compare:ident, $method:ident, $predicate:ident) => {
+        #[inline(always)]
+        unsafe fn $method(self, other: Self) -> $selection {
+            unsafe { $selection($compare::<$predicate>(self.0, other.0)) }
+        }
+    };
+}
+pub(super) use lane_comparisons;
+
+/// [`Wide`]'s operations on two index lanes (`$index`) in an impl, each by its intrinsic.
+macro_rules! index_operations {
+    ($index:ty: $($method:ident $intrinsic:ident),+ $(,)?) => {$(
+        #[inline(always)]
+        unsafe fn $method(a: $index, b: $index) -> $index {
+            unsafe { $intrinsic(a, b) }
+        }
+    )+};
+}
+pub(super) use index_operations;
+
 /// A point of lanes.
 #[derive(Clone, Copy)]
 pub(super) struct V2<V> {
