@@ -1117,7 +1117,7 @@ impl World {
         let seconds = start.elapsed().as_secs_f64();
         self.phase_times.pairs += swept.pair_share * seconds;
         self.phase_times.grains += (1.0 - swept.pair_share) * seconds;
-        self.sweep_tally.add(&swept.plan);
+        self.sweep_tally.add(&swept);
         let mut totals = PairSums::default();
         for sums in swept.pair_sums() {
             if let Some(f) = sums.failure {
