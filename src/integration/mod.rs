@@ -939,20 +939,21 @@ impl World {
         self.phase_times.frames += (frames_done - start).as_secs_f64();
         let (centers, reach) = (&self.centers, &self.reach);
         let cell = self.cell();
-        if let Some(cell) = &cell {
-            // Checked every step: between rebuilds the cell keeps shrinking.
-            let max_reach = crate::geometry::broadphase::largest_reach(reach);
-            let range = 2.0 * max_reach + self.neighbors.skin;
-            if cell.check_range(range).is_err() {
-                return Err(Instability::CellTooNarrow {
-                    step: self.step,
-                    width: cell.widths()[0].min(cell.widths()[1]),
-                    range,
-                });
-            }
-        }
         let rebuild = match &cell {
-            Some(cell) => self.neighbors.needs_rebuild_periodic(centers, reach, cell),
+            Some(cell) => {
+                // Checked every step: between rebuilds the cell keeps shrinking.
+                let max_reach = crate::geometry::broadphase::largest_reach(reach);
+                let range = 2.0 * max_reach + self.neighbors.skin;
+                if cell.check_range(range).is_err() {
+                    return Err(Instability::CellTooNarrow {
+                        step: self.step,
+                        width: cell.widths()[0].min(cell.widths()[1]),
+                        range,
+                    });
+                }
+                self.neighbors
+                    .needs_rebuild_periodic(centers, reach, cell, max_reach)
+            }
             None => self
                 .neighbors
                 .needs_rebuild_with_reserve(centers, reach, reserve),
