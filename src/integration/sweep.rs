@@ -276,14 +276,11 @@ pub(super) fn sweep<'a>(
         pair_chunk_ends: rows.pair_chunk_ends,
     };
     let mut results: Vec<ChunkResults> = (0..chunks).map(|_| ChunkResults::default()).collect();
-    let plan = SweepPlan::new(
-        rows.earliest_first_grains,
-        rows.pair_chunk_ends,
-        rayon::current_num_threads(),
-    );
-    let runs = plan.runs();
-    let run_chunks = |r: usize| plan.run_chunks(r);
-    let waiting = |chunk: usize| plan.waits(rows.earliest_first_grains, chunk);
+    let plan = SweepPlan::new(rows.earliest_first_grains, rayon::current_num_threads());
+    let run = plan.run;
+    let runs = chunks.div_ceil(run);
+    let run_chunks = |r: usize| r * run..chunks.min((r + 1) * run);
+    let waiting = |chunk: usize| waits(rows.earliest_first_grains, chunk, run);
     // Each run's last chunk whose grains wait (none on one thread, or with the passes apart).
     let last_waiting: Vec<Option<usize>> = (0..runs)
         .map(|r| run_chunks(r).rev().find(|&c| plan.fused && waiting(c)))
@@ -381,11 +378,7 @@ pub(super) fn sweep<'a>(
 /// threads: the plan a step of those grains would follow. For a check of a sample's numbering
 /// before a run (`sample::order::threads_wait_warning`).
 pub fn sweep_plan_of(neighbors: &NeighborList, grains: usize, threads: usize) -> SweepPlan {
-    SweepPlan::new(
-        &earliest_first_grains(neighbors, grains),
-        &super::pair_chunk_ends(&neighbors.pairs, grains),
-        threads,
-    )
+    SweepPlan::new(&earliest_first_grains(neighbors, grains), threads)
 }
 
 /// The sweeps of a run so far ([`World::sweep_tally`](super::World)): how many, how many took
@@ -453,14 +446,13 @@ impl std::fmt::Display for SweepTally {
 }
 
 /// How the sweep's tasks share the chunks.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SweepPlan {
-    /// Where each task's run of chunks starts, and (last) where the last one ends: one run a
-    /// thread, so that one thread sweeps every chunk at once.
-    run_starts: Vec<usize>,
+    /// Chunks a task sweeps: one run a thread, so that one thread sweeps every chunk at once.
+    run: usize,
     pub chunks: usize,
-    /// The chunks whose grains would wait, with the passes fused (see [`SweepPlan::waits`];
-    /// on one thread, none): what decides `fused`.
+    /// The chunks whose grains would wait, with the passes fused (see
+    /// [`waits`]; on one thread, none): what decides `fused`.
     pub waiting: usize,
     /// Whether a run's grains follow its pairs (but those of the chunks that wait); else every
     /// grain waits for the second round, and the sweep is the pair pass and then the grain
@@ -469,103 +461,34 @@ pub struct SweepPlan {
 }
 
 impl SweepPlan {
-    /// The plan for chunks whose pairs end at `pair_chunk_ends`, on `threads` threads: runs of
-    /// about equal cost, a chunk costing its pairs and [`GRAIN_COST`] pairs a grain, but for
-    /// the grains of a run's chunks that wait, which the task of the run before it takes
-    /// after its own (see [`sweep`]): that run is left the shorter by as much. With runs of
-    /// as many chunks, on two threads on LAMMPS's 10⁵ packing, the first task did its run and
-    /// then the second's six waiting chunks, some 2% of its time, while the second idled.
-    fn new(earliest_first_grains: &[u32], pair_chunk_ends: &[usize], threads: usize) -> Self {
+    fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
         let chunks = earliest_first_grains.len();
-        assert_eq!(pair_chunk_ends.len(), chunks);
-        let runs = threads.clamp(1, chunks.max(1));
-        let grain_cost = GRAIN_COST * GRAIN_CHUNK;
-        // Each chunk's cost, summed from the first: `cost_before[c]` is that of chunks `..c`.
-        let mut cost_before = Vec::with_capacity(chunks + 1);
-        cost_before.push(0);
-        for c in 0..chunks {
-            let pairs = pair_chunk_ends[c] - if c == 0 { 0 } else { pair_chunk_ends[c - 1] };
-            cost_before.push(cost_before[c] + pairs + grain_cost);
-        }
-        let total = cost_before[chunks];
-        // The chunk where the chunks before cost nearest `cost`.
-        let boundary = |cost: usize| {
-            let after = cost_before
-                .partition_point(|&before| before <= cost)
-                .min(chunks);
-            if after > 0 && cost - cost_before[after - 1] <= cost_before[after].abs_diff(cost) {
-                after - 1
-            } else {
-                after
-            }
-        };
-        let split = |waiting_cost: &dyn Fn(usize) -> usize| -> Vec<usize> {
-            let mut starts: Vec<usize> = (0..runs)
-                .map(|r| boundary((r * total / runs).saturating_sub(waiting_cost(r))))
-                .chain([chunks])
-                .collect();
-            starts[0] = 0;
-            for r in 1..=runs {
-                starts[r] = starts[r].max(starts[r - 1]);
-            }
-            starts
-        };
-        let even = Self::with_starts(earliest_first_grains, split(&|_| 0));
-        // Run r's waiting grains, as the even runs have them, left to run r - 1.
-        let waiting_cost = |r: usize| {
-            even.run_chunks(r)
-                .filter(|&c| r > 0 && even.waits(earliest_first_grains, c))
-                .count()
-                * grain_cost
-        };
-        Self::with_starts(earliest_first_grains, split(&waiting_cost))
-    }
-
-    fn with_starts(earliest_first_grains: &[u32], run_starts: Vec<usize>) -> Self {
-        let chunks = earliest_first_grains.len();
-        let mut plan = Self {
-            run_starts,
-            chunks,
-            waiting: 0,
-            fused: true,
-        };
-        plan.waiting = (0..chunks)
-            .filter(|&c| plan.waits(earliest_first_grains, c))
+        let run = chunks.div_ceil(threads.max(1)).max(1);
+        let waiting = (0..chunks)
+            .filter(|&c| waits(earliest_first_grains, c, run))
             .count();
         // The chunks that wait are the later runs' own: while their grains wait, the first
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
         // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
         // 0.86 times as fast as with the two passes).
-        plan.fused = plan.waiting * MOST_WAITING <= chunks;
-        plan
-    }
-
-    /// The number of runs (tasks).
-    pub fn runs(&self) -> usize {
-        self.run_starts.len().saturating_sub(1)
-    }
-
-    /// Run r's chunks.
-    pub fn run_chunks(&self, r: usize) -> Range<usize> {
-        self.run_starts[r]..self.run_starts[r + 1]
-    }
-
-    /// Whether the grains of chunk `chunk` wait for the earlier runs: whether one of its pairs
-    /// has its first grain before the chunk's run.
-    fn waits(&self, earliest_first_grains: &[u32], chunk: usize) -> bool {
-        let run = self.run_starts[1..].partition_point(|&end| end <= chunk);
-        (earliest_first_grains[chunk] as usize) < self.run_starts[run] * GRAIN_CHUNK
+        Self {
+            run,
+            chunks,
+            waiting,
+            fused: waiting * MOST_WAITING <= chunks,
+        }
     }
 }
-
-/// The cost of a grain in the sweep, in pairs, for the share of the chunks among tasks: on
-/// LAMMPS's 10⁵ packing and on the dense lattice, rigid discs, a grain took the time of 2–2.5
-/// pairs (the passes' times and the pairs a grain).
-const GRAIN_COST: usize = 2;
 
 /// The sweep takes the two passes one after the other where more than one chunk in
 /// `MOST_WAITING` would wait.
 const MOST_WAITING: usize = 8;
+
+/// Whether the grains of chunk `chunk` wait for the earlier runs when tasks sweep runs
+/// of `run` chunks: whether one of its pairs has its first grain before the chunk's run.
+fn waits(earliest_first_grains: &[u32], chunk: usize, run: usize) -> bool {
+    (earliest_first_grains[chunk] as usize) < chunk / run * run * GRAIN_CHUNK
+}
 
 /// The rows the sweep writes, as runs.
 struct Writes<'a> {
@@ -692,7 +615,7 @@ mod tests {
                 let n = world.grains.len();
                 let plan = sweep_plan_of(&world.neighbors, n, threads);
                 let waiting = (0..world.earliest_first_grains.len())
-                    .filter(|&c| plan.waits(&world.earliest_first_grains, c))
+                    .filter(|&c| waits(&world.earliest_first_grains, c, plan.run))
                     .count();
                 (world.sweep_tally, plan, waiting)
             });
@@ -716,40 +639,6 @@ mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn the_plan_leaves_the_run_before_waiting_grains_the_shorter() {
-        // Expectation: on two threads, the first task's work (its run's pairs and grains, then
-        // the second run's waiting grains) and the second's (its run but for those grains)
-        // differ by less than one chunk's cost, where equal runs of chunks would differ by
-        // twice the waiting grains'. 100 chunks of 500 pairs each, whose pairs reach 300
-        // grains back: the two chunks after the runs' boundary wait.
-        let chunks = 100;
-        let pair_chunk_ends: Vec<usize> = (1..=chunks).map(|c| 500 * c).collect();
-        let earliest: Vec<u32> = (0..chunks)
-            .map(|c| (c * GRAIN_CHUNK).saturating_sub(300) as u32)
-            .collect();
-        let chunk_cost = 500 + GRAIN_COST * GRAIN_CHUNK;
-        let grain_cost = GRAIN_COST * GRAIN_CHUNK;
-        let plan = SweepPlan::new(&earliest, &pair_chunk_ends, 2);
-        assert_eq!(plan.runs(), 2);
-        let waiting: Vec<usize> = (0..chunks).filter(|&c| plan.waits(&earliest, c)).collect();
-        let second = plan.run_chunks(1);
-        assert_eq!(waiting, vec![second.start, second.start + 1], "{plan:?}");
-        let first_task = plan.run_chunks(0).len() * chunk_cost + waiting.len() * grain_cost;
-        let second_task = second.len() * chunk_cost - waiting.len() * grain_cost;
-        assert!(
-            first_task.abs_diff(second_task) < chunk_cost,
-            "{first_task} against {second_task}: {plan:?}"
-        );
-        assert!(plan.fused);
-        // One thread: one run of every chunk, none waiting.
-        let one = SweepPlan::new(&earliest, &pair_chunk_ends, 1);
-        assert_eq!(
-            (one.runs(), one.run_chunks(0), one.waiting),
-            (1, 0..chunks, 0)
-        );
     }
 
     #[test]
@@ -800,13 +689,11 @@ mod tests {
                     for _ in 0..40 {
                         world.step().unwrap();
                     }
-                    let plan = SweepPlan::new(
-                        &world.earliest_first_grains,
-                        &world.pair_chunk_ends,
-                        threads,
-                    );
+                    let plan = SweepPlan::new(&world.earliest_first_grains, threads);
                     let waiting = (0..world.earliest_first_grains.len())
-                        .filter(|&c| !plan.fused || plan.waits(&world.earliest_first_grains, c))
+                        .filter(|&c| {
+                            !plan.fused || waits(&world.earliest_first_grains, c, plan.run)
+                        })
                         .count();
                     let contacts: Vec<String> = world
                         .contacts()
