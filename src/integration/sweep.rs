@@ -281,41 +281,65 @@ pub(super) fn sweep<'a>(
     let runs = chunks.div_ceil(run);
     let run_chunks = |r: usize| r * run..chunks.min((r + 1) * run);
     let waiting = |chunk: usize| waits(rows.earliest_first_grains, chunk, run);
-    // Each run's last chunk whose grains wait (none on one thread, or with the passes apart).
-    let last_waiting: Vec<Option<usize>> = (0..runs)
-        .map(|r| run_chunks(r).rev().find(|&c| plan.fused && waiting(c)))
+    // Each run's chunks whose grains wait (none on one thread, or with the passes apart).
+    let waiting_chunks: Vec<Vec<usize>> = (0..runs)
+        .map(|r| {
+            run_chunks(r)
+                .filter(|&c| plan.fused && waiting(c))
+                .collect()
+        })
         .collect();
     // What run r's waiting grains still wait for: the end of each earlier run (whose pairs
     // read their frames and write the records they read), and its own task's pairs up to
-    // its last waiting chunk. Whoever ends the last of these takes them (the counter's
-    // acquire orders its reads after every write they wait for), so that the pool needs no
-    // second round: on two threads, on LAMMPS's 10⁵ packing, that round took 0.11 ms a step
-    // for six chunks' grains (issue #16).
+    // its last waiting chunk. Once the counter is down (its acquire orders the grains' reads
+    // after every write they wait for) the tasks take them chunk by chunk: the one that
+    // ended the last of these, and any task whose run is over while another's still runs.
+    // So the pool needs no second round: on two threads, on LAMMPS's 10⁵ packing, that
+    // round took 0.11 ms a step for six chunks' grains (issue #16).
     let pending: Vec<AtomicUsize> = (0..runs).map(|r| AtomicUsize::new(r + 1)).collect();
+    let next_waiting: Vec<AtomicUsize> = (0..runs).map(|_| AtomicUsize::new(0)).collect();
+    let started: Vec<AtomicBool> = (0..runs).map(|_| AtomicBool::new(false)).collect();
+    let ended: Vec<AtomicBool> = (0..runs).map(|_| AtomicBool::new(false)).collect();
     let any_failed = AtomicBool::new(false);
     let sweep_start = Instant::now();
     let results_rows = RowRuns::new(&mut results);
     // SAFETY (for each `result` below): a chunk's results are written by its run's task (its
     // pairs, and its grains unless they wait) and, for a waiting chunk, by the one task that
-    // takes its run's waiting grains after the counter says that run's task is past it.
+    // claims it after the counter says that run's task is past it.
     let result_of = |chunk: usize| unsafe { &mut results_rows.run(chunk..chunk + 1)[0] };
-    let waiting_grains_ready = |r: usize| {
-        if pending[r].fetch_sub(1, Ordering::AcqRel) != 1 || any_failed.load(Ordering::Acquire) {
-            return;
-        }
-        for chunk in run_chunks(r).filter(|&c| waiting(c)) {
+    // Takes the grains of one waiting chunk whose run's counter is down, if one is left.
+    let take_waiting = || -> bool {
+        for r in 0..runs {
+            if pending[r].load(Ordering::Acquire) != 0 || any_failed.load(Ordering::Acquire) {
+                continue;
+            }
+            let Some(&chunk) =
+                waiting_chunks[r].get(next_waiting[r].fetch_add(1, Ordering::Relaxed))
+            else {
+                continue;
+            };
             let start = Instant::now();
             // SAFETY: every pair that reads the chunk's frames, and every pair its grains
             // read, is done: those of the earlier runs (ended) and its own run's up to its
-            // last waiting chunk (later chunks' pairs meet only later grains).
+            // last waiting chunk (later chunks' pairs meet only later grains); the counter
+            // hands each chunk to one task.
             let grains = unsafe { writes.grain_chunk(&grain_pass, chunk) };
             let result = result_of(chunk);
             result.grains = Some(grains);
             result.grain_seconds = start.elapsed().as_secs_f64();
+            return true;
+        }
+        false
+    };
+    let one_wait_done = |r: usize| {
+        if pending[r].fetch_sub(1, Ordering::AcqRel) == 1 {
+            while take_waiting() {}
         }
     };
     (0..runs).into_par_iter().for_each(|r| {
+        started[r].store(true, Ordering::Release);
         let mut failed = false;
+        let last_waiting = waiting_chunks[r].last().copied();
         for chunk in run_chunks(r) {
             let start = Instant::now();
             // SAFETY: each chunk's pairs are swept once, by its run's task.
@@ -328,8 +352,8 @@ pub(super) fn sweep<'a>(
             if failed {
                 any_failed.store(true, Ordering::Release);
             }
-            if last_waiting[r] == Some(chunk) {
-                waiting_grains_ready(r);
+            if last_waiting == Some(chunk) {
+                one_wait_done(r);
             }
             if plan.fused && !failed && !waiting(chunk) {
                 // SAFETY: the chunk's pairs and those of its run's earlier chunks are done, and
@@ -342,8 +366,29 @@ pub(super) fn sweep<'a>(
             }
         }
         for later in r + 1..runs {
-            if last_waiting[later].is_some() {
-                waiting_grains_ready(later);
+            if !waiting_chunks[later].is_empty() {
+                one_wait_done(later);
+            }
+        }
+        ended[r].store(true, Ordering::Release);
+        // Help with the waiting grains while another task still runs (it waits on nothing,
+        // so this ends); a run not yet started is left to whichever task takes it, which then
+        // ends the last of its waits itself.
+        let mut spins = 0u32;
+        loop {
+            if take_waiting() {
+                continue;
+            }
+            let running = (0..runs)
+                .any(|q| started[q].load(Ordering::Acquire) && !ended[q].load(Ordering::Acquire));
+            if !running || any_failed.load(Ordering::Acquire) {
+                break;
+            }
+            spins += 1;
+            if spins % 64 == 0 {
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
             }
         }
     });
