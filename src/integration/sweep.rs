@@ -365,8 +365,8 @@ pub(super) fn sweep<'a>(
                 result.grain_seconds = pairs_done.elapsed().as_secs_f64();
             }
         }
-        for later in r + 1..runs {
-            if !waiting_chunks[later].is_empty() {
+        for (later, chunks) in waiting_chunks.iter().enumerate().skip(r + 1) {
+            if !chunks.is_empty() {
                 one_wait_done(later);
             }
         }
@@ -385,7 +385,7 @@ pub(super) fn sweep<'a>(
                 break;
             }
             spins += 1;
-            if spins % 64 == 0 {
+            if spins.is_multiple_of(64) {
                 std::thread::yield_now();
             } else {
                 std::hint::spin_loop();
