@@ -650,7 +650,7 @@ mod tests {
         // Expectation: one sweep a step; on one thread no chunk waits and the passes are one
         // sweep; on three, the tally's last plan is what `sweep_plan_of` (the check of a
         // sample file's numbering) gives for the step's list, waiting chunks included, and
-        // those are the chunks that `waits` names.
+        // those are the chunks that `waits` names; the threads' busy share is a share.
         for threads in [1, 3] {
             let (tally, plan, waiting) = in_pool(threads, || {
                 let mut world = packing(ModelLevel::Rigid, false);
@@ -670,6 +670,10 @@ mod tests {
                 "{threads} threads"
             );
             assert_eq!(plan.waiting, waiting, "{threads} threads");
+            // Each task's chunks take disjoint stretches of the sweep's wall time, so the
+            // threads were busy for a share in (0, 1] of it.
+            let busy = tally.busy_share();
+            assert!(busy > 0.0 && busy <= 1.0, "{threads} threads: {tally:?}");
             if threads == 1 {
                 assert_eq!((tally.two_passes, tally.waiting_chunks), (0, 0));
             } else {
