@@ -281,14 +281,14 @@ pub(super) fn sweep<'a>(
     let runs = chunks.div_ceil(run);
     let run_chunks = |r: usize| r * run..chunks.min((r + 1) * run);
     let waiting = |chunk: usize| waits(rows.earliest_first_grains, chunk, run);
-    // Each run's chunks whose grains wait (none on one thread, or with the passes apart).
-    let waiting_chunks: Vec<Vec<usize>> = (0..runs)
-        .map(|r| {
-            run_chunks(r)
-                .filter(|&c| plan.fused && waiting(c))
-                .collect()
-        })
-        .collect();
+    // The chunks whose grains wait (none on one thread, or with the passes apart), in order:
+    // run r's are those within its run.
+    let waiting_chunks: Vec<usize> = (0..chunks).filter(|&c| plan.fused && waiting(c)).collect();
+    let waiting_of = |r: usize| {
+        let run = run_chunks(r);
+        &waiting_chunks[waiting_chunks.partition_point(|&c| c < run.start)
+            ..waiting_chunks.partition_point(|&c| c < run.end)]
+    };
     // What run r's waiting grains still wait for: the end of each earlier run (whose pairs
     // read their frames and write the records they read), and its own task's pairs up to
     // its last waiting chunk. Once the counter is down (its acquire orders the grains' reads
@@ -296,10 +296,7 @@ pub(super) fn sweep<'a>(
     // ended the last of these, and any task whose run is over while another's still runs.
     // So the pool needs no second round: on two threads, on LAMMPS's 10⁵ packing, that
     // round took 0.11 ms a step for six chunks' grains (issue #16).
-    let pending: Vec<AtomicUsize> = (0..runs).map(|r| AtomicUsize::new(r + 1)).collect();
-    let next_waiting: Vec<AtomicUsize> = (0..runs).map(|_| AtomicUsize::new(0)).collect();
-    let started: Vec<AtomicBool> = (0..runs).map(|_| AtomicBool::new(false)).collect();
-    let ended: Vec<AtomicBool> = (0..runs).map(|_| AtomicBool::new(false)).collect();
+    let states: Vec<RunState> = (0..runs).map(RunState::new).collect();
     let any_failed = AtomicBool::new(false);
     let sweep_start = Instant::now();
     let results_rows = RowRuns::new(&mut results);
@@ -309,12 +306,12 @@ pub(super) fn sweep<'a>(
     let result_of = |chunk: usize| unsafe { &mut results_rows.run(chunk..chunk + 1)[0] };
     // Takes the grains of one waiting chunk whose run's counter is down, if one is left.
     let take_waiting = || -> bool {
-        for r in 0..runs {
-            if pending[r].load(Ordering::Acquire) != 0 || any_failed.load(Ordering::Acquire) {
+        for (r, state) in states.iter().enumerate() {
+            if state.pending.load(Ordering::Acquire) != 0 || any_failed.load(Ordering::Acquire) {
                 continue;
             }
             let Some(&chunk) =
-                waiting_chunks[r].get(next_waiting[r].fetch_add(1, Ordering::Relaxed))
+                waiting_of(r).get(state.next_waiting.fetch_add(1, Ordering::Relaxed))
             else {
                 continue;
             };
@@ -332,14 +329,14 @@ pub(super) fn sweep<'a>(
         false
     };
     let one_wait_done = |r: usize| {
-        if pending[r].fetch_sub(1, Ordering::AcqRel) == 1 {
+        if states[r].pending.fetch_sub(1, Ordering::AcqRel) == 1 {
             while take_waiting() {}
         }
     };
     (0..runs).into_par_iter().for_each(|r| {
-        started[r].store(true, Ordering::Release);
+        states[r].started.store(true, Ordering::Release);
         let mut failed = false;
-        let last_waiting = waiting_chunks[r].last().copied();
+        let last_waiting = waiting_of(r).last().copied();
         for chunk in run_chunks(r) {
             let start = Instant::now();
             // SAFETY: each chunk's pairs are swept once, by its run's task.
@@ -365,12 +362,12 @@ pub(super) fn sweep<'a>(
                 result.grain_seconds = pairs_done.elapsed().as_secs_f64();
             }
         }
-        for (later, chunks) in waiting_chunks.iter().enumerate().skip(r + 1) {
-            if !chunks.is_empty() {
+        for later in r + 1..runs {
+            if !waiting_of(later).is_empty() {
                 one_wait_done(later);
             }
         }
-        ended[r].store(true, Ordering::Release);
+        states[r].ended.store(true, Ordering::Release);
         // Help with the waiting grains while another task still runs (it waits on nothing,
         // so this ends); a run not yet started is left to whichever task takes it, which then
         // ends the last of its waits itself.
@@ -379,8 +376,9 @@ pub(super) fn sweep<'a>(
             if take_waiting() {
                 continue;
             }
-            let running = (0..runs)
-                .any(|q| started[q].load(Ordering::Acquire) && !ended[q].load(Ordering::Acquire));
+            let running = states.iter().any(|state| {
+                state.started.load(Ordering::Acquire) && !state.ended.load(Ordering::Acquire)
+            });
             if !running || any_failed.load(Ordering::Acquire) {
                 break;
             }
@@ -416,6 +414,29 @@ pub(super) fn sweep<'a>(
         plan,
         busy_seconds: pair_seconds + grain_seconds,
         thread_seconds: sweep_start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64,
+    }
+}
+
+/// Where one run of the sweep is, for its waiting chunks (see [`sweep`]).
+struct RunState {
+    /// What the run's waiting grains still wait for: the end of each earlier run, and its own
+    /// task's pairs up to its last waiting chunk.
+    pending: AtomicUsize,
+    /// The next of its waiting chunks to hand out once `pending` is down.
+    next_waiting: AtomicUsize,
+    started: AtomicBool,
+    ended: AtomicBool,
+}
+
+impl RunState {
+    /// Run `r`'s state before the sweep: it waits on the `r` runs before it and on itself.
+    fn new(r: usize) -> Self {
+        Self {
+            pending: AtomicUsize::new(r + 1),
+            next_waiting: AtomicUsize::new(0),
+            started: AtomicBool::new(false),
+            ended: AtomicBool::new(false),
+        }
     }
 }
 
