@@ -410,8 +410,7 @@ impl NeighborList {
                     let (ci, reach_i) = (centers[i], reach[i]);
                     let (cx, cy) = unpack(column_and_row[i]);
                     found.clear();
-                    let at_own_images =
-                        inside(cx, cols) && inside(cy, rows) && in_cell(reduced[i]);
+                    let at_own_images = inside(cx, cols) && inside(cy, rows) && in_cell(reduced[i]);
                     let column_runs = NeighborBins::around(cx, cols);
                     for ny in NeighborBins::around(cy, rows).runs().flatten() {
                         for columns in column_runs.runs() {
