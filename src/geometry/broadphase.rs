@@ -13,8 +13,31 @@ use rayon::prelude::*;
 /// Grains per parallel task of a build.
 const BUILD_CHUNK: usize = 256;
 
-/// The pairs a periodic build's task lists, and their images.
-type ChunkPairs = (Vec<[u32; 2]>, Vec<[i64; 2]>);
+/// The working arrays of a build, kept from one build to the next: made afresh each build, they
+/// were pages the kernel zeroed and vectors copied as they grew, some 2% of a rigid step on
+/// LAMMPS's 10⁵ packing, which rebuilds its list every 33 steps (issue #16). They hold nothing
+/// between builds that a build reads.
+#[derive(Clone, Default)]
+struct BuildScratch {
+    /// Each grain's bin: its index in a box, `column | row << 16` in a periodic cell.
+    bin_of_grain: Vec<u32>,
+    /// The bins' grains ([`sort_into_bins`]), and the sort's fill counts.
+    bin_start: Vec<u32>,
+    bin_fill: Vec<u32>,
+    bin_grains: Vec<u32>,
+    binned: Vec<BinnedGrain>,
+    /// The pairs each chunk of [`BUILD_CHUNK`] grains lists, and (periodic) their images.
+    chunk_pairs: Vec<Vec<[u32; 2]>>,
+    chunk_images: Vec<Vec<[i64; 2]>>,
+    /// [`NeighborList::index_second_ends`]'s fill counts.
+    second_fill: Vec<u32>,
+}
+
+impl std::fmt::Debug for BuildScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("BuildScratch")
+    }
+}
 
 #[derive(Debug, Clone, Default)]
 pub struct NeighborList {
@@ -44,6 +67,7 @@ pub struct NeighborList {
     affine_scale: DVec2,
     /// Number of builds so far (a diagnostic).
     pub builds: u64,
+    scratch: BuildScratch,
 }
 
 impl NeighborList {
@@ -226,32 +250,43 @@ impl NeighborList {
             let cy = (((c.y - lo.y) / cell) as usize).min(rows - 1);
             (cx, cy)
         };
+        let mut scratch = std::mem::take(&mut self.scratch);
         // Each grain's bin, in parallel: the divisions were most of the serial sort below.
-        let bin_of_grain: Vec<u32> = centers
-            .par_iter()
-            .with_min_len(4096)
-            .map(|&c| {
+        scratch.bin_of_grain.clear();
+        scratch
+            .bin_of_grain
+            .par_extend(centers.par_iter().with_min_len(4096).map(|&c| {
                 let (cx, cy) = cell_of(c);
                 (cy * cols + cx) as u32
-            })
-            .collect();
-        let (cell_start, cell_grains) =
-            sort_into_bins(n, cols * rows, |g| bin_of_grain[g] as usize);
+            }));
+        let bin_of_grain = &scratch.bin_of_grain;
+        let bins = (
+            &mut scratch.bin_start,
+            &mut scratch.bin_fill,
+            &mut scratch.bin_grains,
+        );
+        sort_into_bins(n, cols * rows, |g| bin_of_grain[g] as usize, bins);
         // The grains in bin order, with what the search reads of them: the bins of a row are
         // consecutive, so that a grain's three neighbouring bins in a row are one run of it,
         // read in order (a third of the loops over bins, and no reads scattered over the
         // grains' arrays).
-        let binned = BinnedGrain::in_order(&cell_grains, centers, reach, |_| true);
+        BinnedGrain::in_order(&mut scratch, centers, reach, |_| true);
+        let (bin_of_grain, cell_start, binned) =
+            (&scratch.bin_of_grain, &scratch.bin_start, &scratch.binned);
+        scratch
+            .chunk_pairs
+            .resize_with(n.div_ceil(BUILD_CHUNK), Vec::new);
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order: two allocations a chunk, not one
         // a grain (they were a tenth of a build).
         // Each task also writes its grains' first ends into `first_offsets`, counted from the
         // chunk's first pair (`append_chunks` adds where the chunk starts).
-        let chunks: Vec<Vec<[u32; 2]>> = self.first_offsets[1..]
+        self.first_offsets[1..]
             .par_chunks_mut(BUILD_CHUNK)
+            .zip(scratch.chunk_pairs.par_iter_mut())
             .enumerate()
-            .map(|(chunk, first_ends)| {
-                let mut pairs = Vec::new();
+            .for_each(|(chunk, (first_ends, pairs))| {
+                pairs.clear();
                 let mut found = Vec::new();
                 let start = chunk * BUILD_CHUNK;
                 for (i, first_end) in (start..).zip(first_ends) {
@@ -278,11 +313,10 @@ impl NeighborList {
                     pairs.extend(found.iter().map(|&j| [i as u32, j]));
                     *first_end = pairs.len() as u32;
                 }
-                pairs
-            })
-            .collect();
-        self.append_chunks(&chunks, None);
-        self.index_second_ends(n);
+            });
+        self.append_chunks(&scratch.chunk_pairs, None);
+        self.index_second_ends(n, &mut scratch.second_fill);
+        self.scratch = scratch;
     }
 
     /// Appends the pairs of a build's chunks (the chunks of [`BUILD_CHUNK`] grains, in order)
@@ -368,27 +402,48 @@ impl NeighborList {
         // Each grain's bin column and row once, in parallel, as in `build` (computed where they
         // were used, three times a grain, each with two floor calls), packed as `cx | cy << 16`
         // so that neither takes a division to recover.
-        let column_and_row: Vec<u32> = self
-            .reference_centers
-            .par_iter()
-            .with_min_len(4096)
-            .map(|&s| {
-                // The fractional part, `s - s.floor()` (no call for a grain inside the cell).
-                let f = DVec2::new(s.x - floor_in_cell(s.x), s.y - floor_in_cell(s.y));
-                let cx = ((f.x * cols as f64) as usize).min(cols - 1);
-                let cy = ((f.y * rows as f64) as usize).min(rows - 1);
-                (cx | cy << 16) as u32
-            })
-            .collect();
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.bin_of_grain.clear();
+        scratch
+            .bin_of_grain
+            .par_extend(
+                self.reference_centers
+                    .par_iter()
+                    .with_min_len(4096)
+                    .map(|&s| {
+                        // The fractional part, `s - s.floor()` (no call for a grain inside
+                        // the cell).
+                        let f = DVec2::new(s.x - floor_in_cell(s.x), s.y - floor_in_cell(s.y));
+                        let cx = ((f.x * cols as f64) as usize).min(cols - 1);
+                        let cy = ((f.y * rows as f64) as usize).min(rows - 1);
+                        (cx | cy << 16) as u32
+                    }),
+            );
         let unpack = |packed: u32| ((packed & 0xffff) as usize, (packed >> 16) as usize);
-        let (cell_start, cell_grains) = sort_into_bins(n, cols * rows, |g| {
-            let (cx, cy) = unpack(column_and_row[g]);
-            cy * cols + cx
-        });
+        let column_and_row = &scratch.bin_of_grain;
+        let bins = (
+            &mut scratch.bin_start,
+            &mut scratch.bin_fill,
+            &mut scratch.bin_grains,
+        );
+        sort_into_bins(
+            n,
+            cols * rows,
+            |g| {
+                let (cx, cy) = unpack(column_and_row[g]);
+                cy * cols + cx
+            },
+            bins,
+        );
         // The grains in bin order, as in `build`: a row's neighbouring bins are one run of it
         // unless they wrap round the cell.
         let reduced = &self.reference_centers;
-        let binned = BinnedGrain::in_order(&cell_grains, centers, reach, |g| in_cell(reduced[g]));
+        BinnedGrain::in_order(&mut scratch, centers, reach, |g| in_cell(reduced[g]));
+        let (column_and_row, cell_start, binned) =
+            (&scratch.bin_of_grain, &scratch.bin_start, &scratch.binned);
+        let chunks = n.div_ceil(BUILD_CHUNK);
+        scratch.chunk_pairs.resize_with(chunks, Vec::new);
+        scratch.chunk_images.resize_with(chunks, Vec::new);
         // A grain in the cell whose neighbouring bins do not wrap round it meets the grains of
         // those bins that are in the cell at their own positions: both reduced coordinates lie
         // in `[0, 1)` and less than two bins apart, at most 2/5 of the cell with five bins or
@@ -400,11 +455,18 @@ impl NeighborList {
         let skin = self.skin;
         // Chunks of grains, each listing its pairs in order, as in `build`: one vector a grain
         // (and one for its bins) made a rebuild six times as long as a box's (issue #16).
-        let chunks: Vec<ChunkPairs> = self.first_offsets[1..]
+        self.first_offsets[1..]
             .par_chunks_mut(BUILD_CHUNK)
+            .zip(
+                scratch
+                    .chunk_pairs
+                    .par_iter_mut()
+                    .zip(scratch.chunk_images.par_iter_mut()),
+            )
             .enumerate()
-            .map(|(chunk, first_ends)| {
-                let (mut pairs, mut images) = (Vec::new(), Vec::new());
+            .for_each(|(chunk, (first_ends, (pairs, images)))| {
+                pairs.clear();
+                images.clear();
                 let mut found: Vec<(u32, [i64; 2])> = Vec::new();
                 for (i, first_end) in (chunk * BUILD_CHUNK..).zip(first_ends) {
                     let (ci, reach_i) = (centers[i], reach[i]);
@@ -443,17 +505,15 @@ impl NeighborList {
                     images.extend(found.iter().map(|&(_, image)| image));
                     *first_end = pairs.len() as u32;
                 }
-                (pairs, images)
-            })
-            .collect();
-        let (pairs, images): (Vec<_>, Vec<_>) = chunks.into_iter().unzip();
-        self.append_chunks(&pairs, Some(&images));
-        self.index_second_ends(n);
+            });
+        self.append_chunks(&scratch.chunk_pairs, Some(&scratch.chunk_images));
+        self.index_second_ends(n, &mut scratch.second_fill);
+        self.scratch = scratch;
     }
 
     /// Fills `second_offsets` and `second_pairs` from `pairs`: a transposition (a pass that
     /// scatters), serial. The first ends are runs of the list, counted by the build's tasks.
-    fn index_second_ends(&mut self, n: usize) {
+    fn index_second_ends(&mut self, n: usize, fill: &mut Vec<u32>) {
         for [_, j] in &self.pairs {
             self.second_offsets[*j as usize + 1] += 1;
         }
@@ -461,7 +521,8 @@ impl NeighborList {
             self.second_offsets[g + 1] += self.second_offsets[g];
         }
         self.second_pairs.resize(self.pairs.len(), 0);
-        let mut fill: Vec<u32> = self.second_offsets[..n].to_vec();
+        fill.clear();
+        fill.extend_from_slice(&self.second_offsets[..n]);
         for (p, [_, j]) in self.pairs.iter().enumerate() {
             let slot = &mut fill[*j as usize];
             self.second_pairs[*slot as usize] = p as u32;
@@ -568,24 +629,29 @@ struct BinnedGrain {
 }
 
 impl BinnedGrain {
-    /// The grains `order` (the bins' grains, bin after bin), each with its centre and reach,
-    /// and whether it is `in_cell`.
+    /// Writes `scratch.binned`: the grains of `scratch.bin_grains` (the bins' grains, bin after
+    /// bin), each with its centre and reach, and whether it is `in_cell`.
     fn in_order(
-        order: &[u32],
+        scratch: &mut BuildScratch,
         centers: &[DVec2],
         reach: &[f64],
         in_cell: impl Fn(usize) -> bool + Sync,
-    ) -> Vec<BinnedGrain> {
-        order
-            .par_iter()
-            .with_min_len(8192)
-            .map(|&j| BinnedGrain {
-                center: centers[j as usize],
-                reach: reach[j as usize],
-                grain: j,
-                in_cell: in_cell(j as usize),
-            })
-            .collect()
+    ) {
+        scratch.binned.clear();
+        scratch
+            .binned
+            .par_extend(
+                scratch
+                    .bin_grains
+                    .par_iter()
+                    .with_min_len(8192)
+                    .map(|&j| BinnedGrain {
+                        center: centers[j as usize],
+                        reach: reach[j as usize],
+                        grain: j,
+                        in_cell: in_cell(j as usize),
+                    }),
+            );
     }
 }
 
@@ -595,24 +661,32 @@ fn in_cell(s: DVec2) -> bool {
     (0.0..1.0).contains(&s.x) && (0.0..1.0).contains(&s.y)
 }
 
-/// Stable counting sort of grains `0..n` into `bins` bins: `(start, grains)`, the grains of bin k
-/// being `grains[start[k]..start[k + 1]]`, in increasing order.
-fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Vec<u32>, Vec<u32>) {
-    let mut start = vec![0u32; bins + 1];
+/// Stable counting sort of grains `0..n` into `bins` bins, into `(start, fill, grains)`: the
+/// grains of bin k are `grains[start[k]..start[k + 1]]`, in increasing order (`fill`: the
+/// sort's counts).
+fn sort_into_bins(
+    n: usize,
+    bins: usize,
+    bin_of: impl Fn(usize) -> usize,
+    (start, fill, grains): (&mut Vec<u32>, &mut Vec<u32>, &mut Vec<u32>),
+) {
+    start.clear();
+    start.resize(bins + 1, 0);
     for g in 0..n {
         start[bin_of(g) + 1] += 1;
     }
     for k in 0..bins {
         start[k + 1] += start[k];
     }
-    let mut fill = start.clone();
-    let mut grains = vec![0u32; n];
+    fill.clear();
+    fill.extend_from_slice(start);
+    grains.clear();
+    grains.resize(n, 0);
     for g in 0..n {
         let slot = &mut fill[bin_of(g)];
         grains[*slot as usize] = g as u32;
         *slot += 1;
     }
-    (start, grains)
 }
 
 /// Replaces the contents of `to` with the `chunks` one after the other, each chunk copied by a
@@ -620,7 +694,11 @@ fn sort_into_bins(n: usize, bins: usize, bin_of: impl Fn(usize) -> usize) -> (Ve
 fn concatenate_in_parallel<T: Copy + Send + Sync>(to: &mut Vec<T>, chunks: &[Vec<T>]) {
     let total: usize = chunks.iter().map(Vec::len).sum();
     to.clear();
-    to.reserve(total);
+    if to.capacity() < total {
+        // A new vector, not the old one grown (which copies its stale entries), with room for
+        // the list's ups and downs from one build to the next.
+        *to = Vec::with_capacity(total + total / 16);
+    }
     let mut places = Vec::with_capacity(chunks.len());
     let mut rest = &mut to.spare_capacity_mut()[..total];
     for chunk in chunks {

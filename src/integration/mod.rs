@@ -978,7 +978,11 @@ impl World {
             let pairs = &self.neighbors.pairs;
             let mut state = std::mem::take(&mut self.spare_pair_state);
             state.clear();
-            state.reserve(pairs.len());
+            if state.capacity() < pairs.len() {
+                // A new vector, not the old one grown (which copies its stale entries), with
+                // room for the list's ups and downs (as the list's own pairs).
+                state = Vec::with_capacity(pairs.len() + pairs.len() / 16);
+            }
             state.spare_capacity_mut()[..pairs.len()]
                 .par_chunks_mut(PAIR_CHUNK)
                 .zip(pairs.par_chunks(PAIR_CHUNK))
