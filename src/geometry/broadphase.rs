@@ -520,6 +520,11 @@ impl NeighborList {
         for g in 0..n {
             self.second_offsets[g + 1] += self.second_offsets[g];
         }
+        if self.second_pairs.capacity() < self.pairs.len() {
+            // As in `concatenate_in_parallel`: anew, not grown with its stale entries copied.
+            let room = self.pairs.len() + self.pairs.len() / 16;
+            self.second_pairs = Vec::with_capacity(room);
+        }
         self.second_pairs.resize(self.pairs.len(), 0);
         fill.clear();
         fill.extend_from_slice(&self.second_offsets[..n]);
