@@ -1475,6 +1475,11 @@ impl DiscPairForces<PairLanes> {
     #[inline(always)]
     fn contacts_if_regular(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
         #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the processor has AVX-512 (tested just above).
+            return unsafe { self.contacts_if_regular_avx512(radius) };
+        }
+        #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX (tested just above).
             return unsafe { self.contacts_if_regular_avx(radius) };
@@ -1486,6 +1491,13 @@ impl DiscPairForces<PairLanes> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn contacts_if_regular_avx(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
+        self.contacts_if_regular_in(radius)
+    }
+
+    /// [`contacts_if_regular`](Self::contacts_if_regular) compiled for AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn contacts_if_regular_avx512(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
         self.contacts_if_regular_in(radius)
     }
 
@@ -1585,11 +1597,28 @@ pub fn disc_pair_forces_dispatch(
     out: &mut DiscPairForces<PairLanes>,
 ) {
     #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the processor has AVX-512 (tested just above).
+        unsafe { disc_pair_forces_avx512(input, law, damping_ratio, out) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         // SAFETY: the processor has AVX (tested just above).
         unsafe { disc_pair_forces_avx(input, law, damping_ratio, out) };
         return;
     }
+    disc_pair_forces(input, law, damping_ratio, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn disc_pair_forces_avx512(
+    input: &DiscPairs<PairLanes>,
+    law: &SecantLaw,
+    damping_ratio: f64,
+    out: &mut DiscPairForces<PairLanes>,
+) {
     disc_pair_forces(input, law, damping_ratio, out);
 }
 
