@@ -110,6 +110,35 @@ impl<'a> PairPass<'a> {
     ) -> PairSums {
         // A world without friction between grains takes a pass that leaves the tangential
         // response out.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the processor has AVX-512 (tested just above).
+            return unsafe { self.chunk_avx512(first_pair, states, actives, records) };
+        }
+        self.chunk_in(first_pair, states, actives, records)
+    }
+
+    /// [`chunk`](Self::chunk) compiled for AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn chunk_avx512(
+        &self,
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
+        self.chunk_in(first_pair, states, actives, records)
+    }
+
+    #[inline(always)]
+    fn chunk_in(
+        &self,
+        first_pair: usize,
+        states: &mut [PairState],
+        actives: &mut [bool],
+        records: &mut [PairContact],
+    ) -> PairSums {
         if self.params.frictional_pairs() {
             self.chunk_of::<true>(first_pair, states, actives, records)
         } else {
@@ -118,6 +147,7 @@ impl<'a> PairPass<'a> {
     }
 
     /// [`chunk`](Self::chunk); `FRICTIONAL`: whether pairs have friction.
+    #[inline(always)]
     fn chunk_of<const FRICTIONAL: bool>(
         &self,
         first_pair: usize,
