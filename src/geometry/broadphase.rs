@@ -898,6 +898,44 @@ mod tests {
     /// within range, found by brute force over all pairs, each with that image (in cells of
     /// more grains than a build's task holds, and of only two bins across).
     #[test]
+    fn a_list_rebuilt_over_other_grains_is_the_list_built_afresh() {
+        // Expectation: a build keeps its working arrays (and the list's vectors) from the
+        // last build, so that a rebuild allocates nothing; it reads nothing of them, so one
+        // list rebuilt in turn over samples of more and fewer grains, in a box and in a cell,
+        // on one thread and on three, is each time the list a new one builds.
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(31);
+        let mut next = || crate::sample::unit_random(&mut rng);
+        let cell =
+            PeriodicCell::new(DVec2::ZERO, DVec2::new(1.0, 0.0), DVec2::new(0.2, 0.9)).unwrap();
+        let skin = 0.01;
+        let mut reused = NeighborList::new(skin);
+        let mut pairs_seen = Vec::new();
+        for (round, count) in [700usize, 300, 1100, 20, 700].into_iter().enumerate() {
+            let centers: Vec<DVec2> = (0..count)
+                .map(|_| cell.position(DVec2::new(next(), next())))
+                .collect();
+            let reach: Vec<f64> = (0..count).map(|_| 0.01 + 0.02 * next()).collect();
+            for periodic in [false, true] {
+                let build = |list: &mut NeighborList| {
+                    if periodic {
+                        list.build_periodic(&centers, &reach, &cell)
+                    } else {
+                        list.build(&centers, &reach)
+                    }
+                };
+                let threads = 1 + 2 * (round % 2);
+                on_threads(threads, || build(&mut reused));
+                let mut fresh = NeighborList::new(skin);
+                build(&mut fresh);
+                assert_same_list(&reused, &fresh, threads);
+                assert_eq!(reused.first_offsets.len(), count + 1);
+                pairs_seen.push(fresh.pairs.len());
+            }
+        }
+        assert!(pairs_seen.iter().all(|&p| p > 0), "{pairs_seen:?}");
+    }
+
+    #[test]
     fn the_periodic_list_finds_exactly_the_pairs_of_a_brute_force_search() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
         let mut next = || crate::sample::unit_random(&mut rng);
