@@ -99,6 +99,9 @@ struct Touch {
     effective_mass: f64,
 }
 
+/// A chunk's pairs' states, flags and records, as [`PairPass::chunk`] writes them.
+type ChunkSlots<'s> = (&'s mut [PairState], &'s mut [bool], &'s mut [PairContact]);
+
 impl<'a> PairPass<'a> {
     /// The pairs of one chunk, the first of which is pair `first_pair`; returns their sums.
     pub fn chunk(
@@ -108,37 +111,26 @@ impl<'a> PairPass<'a> {
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
-        // A world without friction between grains takes a pass that leaves the tangential
-        // response out.
+        let slots = (states, actives, records);
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the processor has AVX-512 (tested just above).
-            return unsafe { self.chunk_avx512(first_pair, states, actives, records) };
+            return unsafe { self.chunk_avx512(first_pair, slots) };
         }
-        self.chunk_in(first_pair, states, actives, records)
+        self.chunk_in(first_pair, slots)
     }
 
     /// [`chunk`](Self::chunk) compiled for AVX-512.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn chunk_avx512(
-        &self,
-        first_pair: usize,
-        states: &mut [PairState],
-        actives: &mut [bool],
-        records: &mut [PairContact],
-    ) -> PairSums {
-        self.chunk_in(first_pair, states, actives, records)
+    fn chunk_avx512(&self, first_pair: usize, slots: ChunkSlots<'_>) -> PairSums {
+        self.chunk_in(first_pair, slots)
     }
 
     #[inline(always)]
-    fn chunk_in(
-        &self,
-        first_pair: usize,
-        states: &mut [PairState],
-        actives: &mut [bool],
-        records: &mut [PairContact],
-    ) -> PairSums {
+    fn chunk_in(&self, first_pair: usize, (states, actives, records): ChunkSlots<'_>) -> PairSums {
+        // A world without friction between grains takes a pass that leaves the tangential
+        // response out.
         if self.params.frictional_pairs() {
             self.chunk_of::<true>(first_pair, states, actives, records)
         } else {
@@ -1641,27 +1633,24 @@ pub fn disc_pair_forces_dispatch(
     disc_pair_forces(input, law, damping_ratio, out);
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-fn disc_pair_forces_avx512(
-    input: &DiscPairs<PairLanes>,
-    law: &SecantLaw,
-    damping_ratio: f64,
-    out: &mut DiscPairForces<PairLanes>,
-) {
-    disc_pair_forces(input, law, damping_ratio, out);
+/// [`disc_pair_forces`] of [`PairLanes`] compiled for the target feature `$feature`, as `$name`.
+macro_rules! disc_pair_forces_for {
+    ($name:ident, $feature:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        fn $name(
+            input: &DiscPairs<PairLanes>,
+            law: &SecantLaw,
+            damping_ratio: f64,
+            out: &mut DiscPairForces<PairLanes>,
+        ) {
+            disc_pair_forces(input, law, damping_ratio, out);
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn disc_pair_forces_avx(
-    input: &DiscPairs<PairLanes>,
-    law: &SecantLaw,
-    damping_ratio: f64,
-    out: &mut DiscPairForces<PairLanes>,
-) {
-    disc_pair_forces(input, law, damping_ratio, out);
-}
+disc_pair_forces_for!(disc_pair_forces_avx512, "avx512f");
+disc_pair_forces_for!(disc_pair_forces_avx, "avx");
 
 #[cfg(test)]
 mod tests {
