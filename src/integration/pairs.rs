@@ -1244,6 +1244,12 @@ impl DiscPairs<PairLanes> {
     #[inline(always)]
     fn set_circles(&mut self, ends: &[(&Frame, &Frame); LANES]) {
         #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the processor has AVX-512 (tested just above).
+            unsafe { self.set_circles_avx512(ends) };
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX (tested just above).
             unsafe { self.set_circles_avx(ends) };
@@ -1290,6 +1296,83 @@ impl DiscPairs<PairLanes> {
         self.second.center[1].0[lane] = end.center.y;
         self.affine_rate[0].0[lane] = end.affine_rate.x;
         self.affine_rate[1].0[lane] = end.affine_rate.y;
+    }
+
+    /// [`set_circles`](Self::set_circles) with AVX-512: for each circle of the pairs, the eight
+    /// frames' (centre, radius, mass) loaded as two-frame vectors and transposed, their
+    /// velocities interleaved, their spins gathered (issue #16: the eight lanes in one register
+    /// each, where AVX took two quads of four).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn set_circles_avx512(&mut self, ends: &[(&Frame, &Frame); LANES]) {
+        use std::arch::x86_64::*;
+        const _: () = assert!(LANES == 8);
+        for (second, circles) in [(false, &mut self.first), (true, &mut self.second)] {
+            let frame = |k: usize| {
+                let (fi, fj) = ends[k];
+                if second { fj } else { fi }
+            };
+            // The loads read through a pointer to the whole frame (a pointer to one field may
+            // not read past it).
+            let line = |k: usize| (frame(k) as *const Frame).cast::<f64>();
+            // SAFETY: as in `set_circles_avx`: a frame is aligned to 64 bytes and holds its
+            // centre, radius and mass in its first 32 bytes and its velocity in the next 16
+            // (`FRAME_LINE`), all initialised f64s; the lanes are stored unaligned, eight
+            // values each.
+            unsafe {
+                let first_half = |k: usize| _mm256_load_pd(line(k));
+                // Frames k and k + 4 in one register: [k | k + 4].
+                let pair = |k: usize| {
+                    _mm512_insertf64x4::<1>(
+                        _mm512_castpd256_pd512(first_half(k)),
+                        first_half(k + 4),
+                    )
+                };
+                let (z0, z1, z2, z3) = (pair(0), pair(1), pair(2), pair(3));
+                // Per 256-bit half: (x, x', radius, radius') and (y, y', mass, mass') of two
+                // consecutive frames.
+                let (t0, t1) = (_mm512_unpacklo_pd(z0, z1), _mm512_unpackhi_pd(z0, z1));
+                let (t2, t3) = (_mm512_unpacklo_pd(z2, z3), _mm512_unpackhi_pd(z2, z3));
+                let even = _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13);
+                let odd = _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15);
+                let velocity = |k: usize| _mm_load_pd(line(k).add(FRAME_LINE[4] / 8));
+                // Frames (k, k + 2) and (k + 4, k + 6) in one register's four quarters.
+                let quarters = |k: usize| {
+                    let low = _mm256_insertf128_pd::<1>(
+                        _mm256_castpd128_pd256(velocity(k)),
+                        velocity(k + 2),
+                    );
+                    let high = _mm256_insertf128_pd::<1>(
+                        _mm256_castpd128_pd256(velocity(k + 4)),
+                        velocity(k + 6),
+                    );
+                    _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(low), high)
+                };
+                let (u0, u1) = (quarters(0), quarters(1));
+                let omega = _mm512_setr_pd(
+                    frame(0).omega,
+                    frame(1).omega,
+                    frame(2).omega,
+                    frame(3).omega,
+                    frame(4).omega,
+                    frame(5).omega,
+                    frame(6).omega,
+                    frame(7).omega,
+                );
+                let values = [
+                    _mm512_permutex2var_pd(t0, even, t2),
+                    _mm512_permutex2var_pd(t1, even, t3),
+                    _mm512_permutex2var_pd(t0, odd, t2),
+                    _mm512_permutex2var_pd(t1, odd, t3),
+                    _mm512_unpacklo_pd(u0, u1),
+                    _mm512_unpackhi_pd(u0, u1),
+                    omega,
+                ];
+                for (lanes, value) in circles.in_frame_order().into_iter().zip(values) {
+                    _mm512_storeu_pd(lanes.0.as_mut_ptr(), value);
+                }
+            }
+        }
     }
 
     /// [`set_circles`](Self::set_circles) with AVX: for each circle of the pairs and each four
@@ -2017,28 +2100,60 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_frames_shuffled_into_lanes_are_the_frames_set_lane_by_lane() {
-        // Expectation: `set_circles` moves values and computes nothing: whatever instructions
-        // it takes (AVX shuffles here where the processor has them), every lane holds what
-        // setting the lanes one value at a time puts there.
+    /// Checks that `shuffle` puts eight pairs of circles into lanes as setting the lanes one
+    /// value at a time does (`what` names it); returns the lanes so set.
+    fn assert_shuffled_as_one_by_one(
+        what: &str,
+        shuffle: impl Fn(&mut DiscPairs<PairLanes>, &[(&Frame, &Frame); LANES]),
+    ) -> DiscPairs<PairLanes> {
         let (frames, pairs) = circle_pairs(6);
         let mut ends = [(&frames[0], &frames[0]); LANES];
         for (end, &[i, j]) in ends.iter_mut().zip(&pairs[LANES..]) {
             *end = (&frames[i as usize], &frames[j as usize]);
         }
         let mut shuffled = DiscPairs::<PairLanes>::default();
-        shuffled.set_circles(&ends);
+        shuffle(&mut shuffled, &ends);
         let mut one_by_one = DiscPairs::<PairLanes>::default();
         for (lane, (fi, fj)) in ends.iter().enumerate() {
             one_by_one.first.set_lane(lane, fi);
             one_by_one.second.set_lane(lane, fj);
         }
-        assert_eq!(format!("{shuffled:?}"), format!("{one_by_one:?}"));
+        assert_eq!(format!("{shuffled:?}"), format!("{one_by_one:?}"), "{what}");
+        one_by_one
+    }
+
+    #[test]
+    fn the_frames_shuffled_into_lanes_are_the_frames_set_lane_by_lane() {
+        // Expectation: `set_circles` moves values and computes nothing: whatever instructions
+        // it takes (AVX or AVX-512 shuffles here where the processor has them), every lane
+        // holds what setting the lanes one value at a time puts there.
+        let mut one_by_one =
+            assert_shuffled_as_one_by_one("set_circles", |lanes, ends| lanes.set_circles(ends));
         // Every lane was set (no value of the frames is zero).
         for circles in [&mut one_by_one.first, &mut one_by_one.second] {
             let lanes = circles.in_frame_order();
             assert!(lanes.iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
+        }
+    }
+
+    #[test]
+    fn every_shuffle_of_the_frames_into_lanes_is_the_lanes_set_one_by_one() {
+        // Expectation: as above, for the AVX shuffle and the AVX-512 one each where the
+        // processor has it (the dispatch takes only the widest).
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the processor has AVX (tested just above).
+                assert_shuffled_as_one_by_one("AVX", |lanes, ends| unsafe {
+                    lanes.set_circles_avx(ends)
+                });
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the processor has AVX-512 (tested just above).
+                assert_shuffled_as_one_by_one("AVX-512", |lanes, ends| unsafe {
+                    lanes.set_circles_avx512(ends)
+                });
+            }
         }
     }
 
