@@ -21,16 +21,16 @@ const BUILD_CHUNK: usize = 256;
 struct BuildScratch {
     /// Each grain's bin: its index in a box, `column | row << 16` in a periodic cell.
     bin_of_grain: Vec<u32>,
-    /// The bins' grains ([`sort_into_bins`]), and the sort's fill counts.
+    /// The bins' grains ([`sort_into_bins`]).
     bin_start: Vec<u32>,
-    bin_fill: Vec<u32>,
     bin_grains: Vec<u32>,
     binned: Vec<BinnedGrain>,
     /// The pairs each chunk of [`BUILD_CHUNK`] grains lists, and (periodic) their images.
     chunk_pairs: Vec<Vec<[u32; 2]>>,
     chunk_images: Vec<Vec<[i64; 2]>>,
-    /// [`NeighborList::index_second_ends`]'s fill counts.
-    second_fill: Vec<u32>,
+    /// The fill counts of a counting sort: [`sort_into_bins`]'s, then
+    /// [`NeighborList::index_second_ends`]'s.
+    fill: Vec<u32>,
 }
 
 impl std::fmt::Debug for BuildScratch {
@@ -262,7 +262,7 @@ impl NeighborList {
         let bin_of_grain = &scratch.bin_of_grain;
         let bins = (
             &mut scratch.bin_start,
-            &mut scratch.bin_fill,
+            &mut scratch.fill,
             &mut scratch.bin_grains,
         );
         sort_into_bins(n, cols * rows, |g| bin_of_grain[g] as usize, bins);
@@ -315,7 +315,7 @@ impl NeighborList {
                 }
             });
         self.append_chunks(&scratch.chunk_pairs, None);
-        self.index_second_ends(n, &mut scratch.second_fill);
+        self.index_second_ends(n, &mut scratch.fill);
         self.scratch = scratch;
     }
 
@@ -423,7 +423,7 @@ impl NeighborList {
         let column_and_row = &scratch.bin_of_grain;
         let bins = (
             &mut scratch.bin_start,
-            &mut scratch.bin_fill,
+            &mut scratch.fill,
             &mut scratch.bin_grains,
         );
         sort_into_bins(
@@ -507,7 +507,7 @@ impl NeighborList {
                 }
             });
         self.append_chunks(&scratch.chunk_pairs, Some(&scratch.chunk_images));
-        self.index_second_ends(n, &mut scratch.second_fill);
+        self.index_second_ends(n, &mut scratch.fill);
         self.scratch = scratch;
     }
 
@@ -520,11 +520,7 @@ impl NeighborList {
         for g in 0..n {
             self.second_offsets[g + 1] += self.second_offsets[g];
         }
-        if self.second_pairs.capacity() < self.pairs.len() {
-            // As in `concatenate_in_parallel`: anew, not grown with its stale entries copied.
-            self.second_pairs =
-                Vec::with_capacity(grown_capacity(&self.second_pairs, self.pairs.len()));
-        }
+        clear_with_room(&mut self.second_pairs, self.pairs.len());
         self.second_pairs.resize(self.pairs.len(), 0);
         fill.clear();
         fill.extend_from_slice(&self.second_offsets[..n]);
@@ -694,23 +690,23 @@ fn sort_into_bins(
     }
 }
 
-/// The capacity a vector that must hold `needed` entries takes anew: at least twice its
-/// capacity, as a vector grows. (Some 6% more than needed instead, a growing list of a
-/// compaction freed a vector every few hundred steps, and the freed ones stayed in the heap:
-/// `scenarios/isotropic_100k.ron` peaked at 198 MB against 122 MB.)
-pub(crate) fn grown_capacity<T>(vector: &Vec<T>, needed: usize) -> usize {
-    needed.max(2 * vector.capacity())
+/// Empties `vector` and gives it room for `needed` entries: where it has too little, a new
+/// vector of at least twice its capacity, as a vector grows, rather than the old one grown
+/// (which copies its stale entries into fresh pages). (With some 6% more than needed instead, a
+/// compaction's growing list freed a vector every few hundred steps, and the freed ones stayed
+/// in the heap: `scenarios/isotropic_100k.ron` peaked at 198 MB against 122 MB.)
+pub(crate) fn clear_with_room<T>(vector: &mut Vec<T>, needed: usize) {
+    vector.clear();
+    if vector.capacity() < needed {
+        *vector = Vec::with_capacity(needed.max(2 * vector.capacity()));
+    }
 }
 
 /// Replaces the contents of `to` with the `chunks` one after the other, each chunk copied by a
 /// task of its own.
 fn concatenate_in_parallel<T: Copy + Send + Sync>(to: &mut Vec<T>, chunks: &[Vec<T>]) {
     let total: usize = chunks.iter().map(Vec::len).sum();
-    to.clear();
-    if to.capacity() < total {
-        // A new vector, not the old one grown (which copies its stale entries).
-        *to = Vec::with_capacity(grown_capacity(to, total));
-    }
+    clear_with_room(to, total);
     let mut places = Vec::with_capacity(chunks.len());
     let mut rest = &mut to.spare_capacity_mut()[..total];
     for chunk in chunks {
@@ -894,9 +890,6 @@ mod tests {
         }
     }
 
-    /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
-    /// within range, found by brute force over all pairs, each with that image (in cells of
-    /// more grains than a build's task holds, and of only two bins across).
     #[test]
     fn a_list_rebuilt_over_other_grains_is_the_list_built_afresh() {
         // Expectation: a build keeps its working arrays (and the list's vectors) from the
@@ -935,6 +928,9 @@ mod tests {
         assert!(pairs_seen.iter().all(|&p| p > 0), "{pairs_seen:?}");
     }
 
+    /// Expectation: the periodic list holds exactly the pairs whose minimum-image distance is
+    /// within range, found by brute force over all pairs, each with that image (in cells of
+    /// more grains than a build's task holds, and of only two bins across).
     #[test]
     fn the_periodic_list_finds_exactly_the_pairs_of_a_brute_force_search() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);

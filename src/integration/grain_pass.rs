@@ -129,10 +129,7 @@ impl GrainPass<'_> {
         let mut sums = ChunkSums::default();
         let near = walls_in_reach(chunk.centers, chunk.reach, walls);
         let constants = UpdateConstants::new(params);
-        // A chunk with full-level or rigid grains, on a plain step, goes by blocks of four:
-        // those whose grains are all at the full level, or all at the rigid level, have their
-        // updates run side by side in lanes, the others go one by one. Any other chunk goes one
-        // by one.
+        let n = chunk.grains.len();
         let (mut full, mut rigid) = (0, 0);
         for level in chunk.levels.iter() {
             full += (level.level == ModelLevel::Full) as usize;
@@ -144,8 +141,8 @@ impl GrainPass<'_> {
         // Not zeroed first: the 4 KB memset was 16 instructions a grain-step under callgrind
         // (`rep stosb`), and every entry a grain reads is written.
         let mut directions = [MaybeUninit::<DVec2>::uninit(); GRAIN_CHUNK];
-        let directions = if rigid == chunk.grains.len() {
-            &NO_DIRECTIONS[..rigid]
+        let directions = if rigid == n {
+            &NO_DIRECTIONS[..n]
         } else {
             principal_directions(chunk.grains, chunk.levels, &mut directions)
         };
@@ -154,10 +151,10 @@ impl GrainPass<'_> {
             near,
             springs: self.wall_springs,
         };
-        if !self.blocks {
-            (full, rigid) = (0, 0);
-        }
-        let n = chunk.grains.len();
+        // A chunk with full-level or rigid grains, on a plain step, goes by blocks of four:
+        // those whose grains are all at the full level, or all at the rigid level, have their
+        // updates run side by side in lanes, the others go one by one. Any other chunk goes one
+        // by one.
         let chunk_level = if full == n {
             Some(ModelLevel::Full)
         } else if rigid == n {
@@ -165,7 +162,7 @@ impl GrainPass<'_> {
         } else {
             None
         };
-        let blocks_done = if full + rigid > 0 {
+        let blocks_done = if self.blocks && full + rigid > 0 {
             self.by_blocks(
                 first,
                 &mut chunk,

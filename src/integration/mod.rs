@@ -37,7 +37,7 @@ use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symm
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
 use crate::geometry::affine::{AffineState, Mat2, map_and_velocity_gradient};
 use crate::geometry::angle;
-use crate::geometry::broadphase::{NeighborList, grown_capacity};
+use crate::geometry::broadphase::{NeighborList, clear_with_room};
 use crate::geometry::contour::QUARTER_TURN;
 use crate::geometry::intersection_lanes::LaneShape;
 use crate::geometry::{Contours, GrainShape, PairHint};
@@ -977,11 +977,7 @@ impl World {
             // first was a serial pass over every pair.
             let pairs = &self.neighbors.pairs;
             let mut state = std::mem::take(&mut self.spare_pair_state);
-            state.clear();
-            if state.capacity() < pairs.len() {
-                // A new vector, not the old one grown (which copies its stale entries).
-                state = Vec::with_capacity(grown_capacity(&state, pairs.len()));
-            }
+            clear_with_room(&mut state, pairs.len());
             state.spare_capacity_mut()[..pairs.len()]
                 .par_chunks_mut(PAIR_CHUNK)
                 .zip(pairs.par_chunks(PAIR_CHUNK))
