@@ -277,13 +277,15 @@ pub(super) fn sweep<'a>(
     };
     let mut results: Vec<ChunkResults> = (0..chunks).map(|_| ChunkResults::default()).collect();
     let plan = SweepPlan::new(rows.earliest_first_grains, rayon::current_num_threads());
-    let run = plan.run;
-    let runs = chunks.div_ceil(run);
-    let run_chunks = |r: usize| r * run..chunks.min((r + 1) * run);
-    let waiting = |chunk: usize| waits(rows.earliest_first_grains, chunk, run);
+    let runs = plan.runs();
+    let run_chunks = |r: usize| plan.run_chunks(r);
+    let efg = rows.earliest_first_grains;
+    let waiting_in = |r: usize, chunk: usize| waits_from(efg, chunk, plan.starts[r]);
     // The chunks whose grains wait (none on one thread, or with the passes apart), in order:
     // run r's are those within its run.
-    let waiting_chunks: Vec<usize> = (0..chunks).filter(|&c| plan.fused && waiting(c)).collect();
+    let waiting_chunks: Vec<usize> = (0..runs)
+        .flat_map(|r| run_chunks(r).filter(move |&c| plan.fused && waiting_in(r, c)))
+        .collect();
     let waiting_of = |r: usize| {
         let run = run_chunks(r);
         &waiting_chunks[waiting_chunks.partition_point(|&c| c < run.start)
@@ -352,7 +354,7 @@ pub(super) fn sweep<'a>(
             if last_waiting == Some(chunk) {
                 one_wait_done(r);
             }
-            if plan.fused && !failed && !waiting(chunk) {
+            if plan.fused && !failed && !waiting_in(r, chunk) {
                 // SAFETY: the chunk's pairs and those of its run's earlier chunks are done, and
                 // no pair of it meets a grain before the run: the records it reads are
                 // written, and the pair passes still to come read none of its frames.
@@ -512,13 +514,15 @@ impl std::fmt::Display for SweepTally {
 }
 
 /// How the sweep's tasks share the chunks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct SweepPlan {
-    /// Chunks a task sweeps: one run a thread, so that one thread sweeps every chunk at once.
-    run: usize,
+    /// Where each task's run of chunks starts, and the chunks' end: run `r` is
+    /// `starts[r]..starts[r + 1]`, one run a thread, so that one thread sweeps every chunk at
+    /// once.
+    starts: Vec<usize>,
     pub chunks: usize,
     /// The chunks whose grains would wait, with the passes fused (see
-    /// [`waits`]; on one thread, none): what decides `fused`.
+    /// [`SweepPlan::waits`]; on one thread, none): what decides `fused`.
     pub waiting: usize,
     /// Whether a run's grains follow its pairs (but those of the chunks that wait); else every
     /// grain waits for the second round, and the sweep is the pair pass and then the grain
@@ -530,19 +534,64 @@ impl SweepPlan {
     fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
         let chunks = earliest_first_grains.len();
         let run = chunks.div_ceil(threads.max(1)).max(1);
-        let waiting = (0..chunks)
-            .filter(|&c| waits(earliest_first_grains, c, run))
+        let even: Vec<usize> = (0..chunks.div_ceil(run))
+            .map(|r| r * run)
+            .chain([chunks])
+            .collect();
+        // A run's waiting grains are left to the end of the sweep, where every thread shares
+        // them: a run with waiting chunks ends sooner by their grains, and with runs of equal
+        // length its thread then idled until the first run ended (issue #16: 3.5% of the
+        // threads' time in the sweep on LAMMPS's 10⁵ packing, two threads, six chunks
+        // waiting). So each run is lengthened by half its waiting chunks, the grain pass's
+        // rough share of a chunk's time (fixed, so that the plan is a function of the list).
+        let waiting: Vec<usize> = (0..even.len() - 1)
+            .map(|r| {
+                (even[r]..even[r + 1])
+                    .filter(|&c| waits_from(earliest_first_grains, c, even[r]))
+                    .count()
+            })
+            .collect();
+        let runs = waiting.len();
+        let own_work = (chunks as f64 - 0.5 * waiting.iter().sum::<usize>() as f64) / runs as f64;
+        let mut starts = Vec::with_capacity(runs + 1);
+        let mut end = 0.0_f64;
+        for &w in &waiting {
+            starts.push((end.round() as usize).min(chunks));
+            end += own_work + 0.5 * w as f64;
+        }
+        starts.push(chunks);
+        let mut plan = Self {
+            starts,
+            chunks,
+            waiting: 0,
+            fused: false,
+        };
+        plan.waiting = (0..chunks)
+            .filter(|&c| plan.waits(earliest_first_grains, c))
             .count();
         // The chunks that wait are the later runs' own: while their grains wait, the first
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
         // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
         // 0.86 times as fast as with the two passes).
-        Self {
-            run,
-            chunks,
-            waiting,
-            fused: waiting * MOST_WAITING <= chunks,
-        }
+        plan.fused = plan.waiting * MOST_WAITING <= chunks;
+        plan
+    }
+
+    /// The runs of chunks, one a task.
+    fn runs(&self) -> usize {
+        self.starts.len() - 1
+    }
+
+    /// The chunks of run `r`.
+    fn run_chunks(&self, r: usize) -> Range<usize> {
+        self.starts[r]..self.starts[r + 1]
+    }
+
+    /// Whether the grains of chunk `chunk` wait for the earlier runs: whether one of its pairs
+    /// has its first grain before the chunk's run.
+    fn waits(&self, earliest_first_grains: &[u32], chunk: usize) -> bool {
+        let run = self.starts.partition_point(|&start| start <= chunk) - 1;
+        waits_from(earliest_first_grains, chunk, self.starts[run])
     }
 }
 
@@ -550,10 +599,10 @@ impl SweepPlan {
 /// `MOST_WAITING` would wait.
 const MOST_WAITING: usize = 8;
 
-/// Whether the grains of chunk `chunk` wait for the earlier runs when tasks sweep runs
-/// of `run` chunks: whether one of its pairs has its first grain before the chunk's run.
-fn waits(earliest_first_grains: &[u32], chunk: usize, run: usize) -> bool {
-    (earliest_first_grains[chunk] as usize) < chunk / run * run * GRAIN_CHUNK
+/// Whether the grains of chunk `chunk`, in a run that starts at chunk `run_start`, wait for
+/// the earlier runs: whether one of its pairs has its first grain before the run.
+fn waits_from(earliest_first_grains: &[u32], chunk: usize, run_start: usize) -> bool {
+    (earliest_first_grains[chunk] as usize) < run_start * GRAIN_CHUNK
 }
 
 /// The rows the sweep writes, as runs.
@@ -681,7 +730,7 @@ mod tests {
                 let n = world.grains.len();
                 let plan = sweep_plan_of(&world.neighbors, n, threads);
                 let waiting = (0..world.earliest_first_grains.len())
-                    .filter(|&c| waits(&world.earliest_first_grains, c, plan.run))
+                    .filter(|&c| plan.waits(&world.earliest_first_grains, c))
                     .count();
                 (world.sweep_tally, plan, waiting)
             });
@@ -708,6 +757,40 @@ mod tests {
                     "{tally:?} {plan:?}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn runs_with_waiting_chunks_are_longer_by_half_of_them() {
+        // Expectation: the runs cover the chunks in order, one a thread; a run's waiting
+        // grains are shared at the end of the sweep, so each run's own work (its chunks less
+        // half its waiting ones, the grain pass's share) is the same but for the rounding of
+        // the runs' ends to whole chunks (at most one chunk either side of the even share).
+        for threads in [2, 3, 4] {
+            let mut world = packing(ModelLevel::Rigid, false);
+            world.step().unwrap();
+            let efg = &world.earliest_first_grains;
+            let plan = SweepPlan::new(efg, threads);
+            let chunks = efg.len();
+            assert_eq!(plan.runs(), threads);
+            assert_eq!((plan.starts[0], plan.starts[threads]), (0, chunks));
+            assert!(plan.starts.is_sorted(), "{plan:?}");
+            let waiting: Vec<usize> = (0..threads)
+                .map(|r| plan.run_chunks(r).filter(|&c| plan.waits(efg, c)).count())
+                .collect();
+            assert_eq!(waiting.iter().sum::<usize>(), plan.waiting);
+            assert!(waiting[1..].iter().all(|&w| w > 0), "{waiting:?}");
+            let even = (chunks as f64 - 0.5 * plan.waiting as f64) / threads as f64;
+            for r in 0..threads {
+                let own = plan.run_chunks(r).len() as f64 - 0.5 * waiting[r] as f64;
+                assert!(
+                    (own - even).abs() <= 1.5,
+                    "{threads} threads, run {r}: {own} chunks of its own, against {even}"
+                );
+            }
+            // The first run waits on nothing, and is shorter than the others.
+            assert_eq!(waiting[0], 0);
+            assert!(plan.run_chunks(0).len() < plan.run_chunks(threads - 1).len());
         }
     }
 
@@ -761,9 +844,7 @@ mod tests {
                     }
                     let plan = SweepPlan::new(&world.earliest_first_grains, threads);
                     let waiting = (0..world.earliest_first_grains.len())
-                        .filter(|&c| {
-                            !plan.fused || waits(&world.earliest_first_grains, c, plan.run)
-                        })
+                        .filter(|&c| !plan.fused || plan.waits(&world.earliest_first_grains, c))
                         .count();
                     let contacts: Vec<String> = world
                         .contacts()
