@@ -299,14 +299,12 @@ impl NeighborList {
                     for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
                         let run = cell_start[ny * cols + first_column] as usize
                             ..cell_start[ny * cols + last_column + 1] as usize;
-                        for other in &binned[run] {
-                            if other.grain as usize <= i {
-                                continue;
-                            }
+                        let run = &binned[run];
+                        found.reserve(run.len());
+                        for other in run {
                             let limit = reach_i + other.reach + skin;
-                            if ci.distance_squared(other.center) < limit * limit {
-                                found.push(other.grain);
-                            }
+                            let near = ci.distance_squared(other.center) < limit * limit;
+                            push_if(&mut found, other.grain, near & (other.grain as usize > i));
                         }
                     }
                     found.sort_unstable();
@@ -478,17 +476,18 @@ impl NeighborList {
                         for columns in column_runs.runs() {
                             let run = cell_start[ny * cols + columns.start] as usize
                                 ..cell_start[ny * cols + columns.end] as usize;
-                            for other in &binned[run] {
+                            let run = &binned[run];
+                            found.reserve(run.len());
+                            for other in run {
                                 let j = other.grain;
-                                if (j as usize) <= i {
-                                    continue;
-                                }
                                 let limit = reach_i + other.reach + skin;
                                 if at_own_images && other.in_cell {
                                     let d = other.center - ci;
-                                    if d.length_squared() < limit * limit {
-                                        found.push((j, [0, 0]));
-                                    }
+                                    let near = d.length_squared() < limit * limit;
+                                    push_if(&mut found, (j, [0, 0]), near & (j as usize > i));
+                                    continue;
+                                }
+                                if (j as usize) <= i {
                                     continue;
                                 }
                                 // `d = x_j - x_i - H m`: the image of j nearest i is at
@@ -687,6 +686,22 @@ fn sort_into_bins(
         let slot = &mut fill[bin_of(g)];
         grains[*slot as usize] = g as u32;
         *slot += 1;
+    }
+}
+
+/// Appends `value` to `vector` where `keep` holds, without a branch on it: written always, and
+/// the length moved past it or not. The searches' tests of a candidate (an index above the
+/// grain's, and within range) go either way about as often, and their branches were
+/// mispredicted often (issue #16). `vector` must have room for one more entry.
+#[inline(always)]
+fn push_if<T: Copy>(vector: &mut Vec<T>, value: T, keep: bool) {
+    let len = vector.len();
+    assert!(len < vector.capacity());
+    // SAFETY: `len` is within the capacity (asserted above); the entry is written before the
+    // length may take it in.
+    unsafe {
+        vector.as_mut_ptr().add(len).write(value);
+        vector.set_len(len + keep as usize);
     }
 }
 
