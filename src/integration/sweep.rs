@@ -24,6 +24,7 @@ use super::grain_pass::{GrainChunk, GrainPass};
 use super::pairs::PairPass;
 use super::{
     ChunkSums, Frame, GRAIN_CHUNK, GrainStress, MAX_WALLS, PairContact, PairState, PairSums,
+    prefetch_address,
 };
 use crate::geometry::broadphase::NeighborList;
 use crate::grain::{Grain, GrainLevel};
@@ -631,6 +632,7 @@ impl Writes<'_> {
             self.pair_chunk_ends[chunk - 1]
         };
         let pairs = start..self.pair_chunk_ends[chunk];
+        self.prefetch_grain_rows(chunk);
         // SAFETY: the caller's: these runs of the pair rows are this chunk's alone.
         unsafe {
             pass.chunk(
@@ -640,6 +642,26 @@ impl Writes<'_> {
                 self.pair_contacts.run(pairs),
             )
         }
+    }
+
+    /// Asks for the rows of chunk `chunk`'s grains that its grain pass reads or writes first,
+    /// in a loop with nothing else to overlap their loads (its grains' levels, counted, and
+    /// the broad phase's centres and reaches, copied from the new frames), while its pairs
+    /// are swept (issue #16: the count of levels and the copy were 5.4% of a one-thread step
+    /// on LAMMPS's 10⁵ packing, 3.4% with the rows asked for).
+    #[inline(always)]
+    fn prefetch_grain_rows(&self, chunk: usize) {
+        fn lines<T>(rows: &RowRuns<'_, T>, chunk: usize) {
+            let first = chunk * GRAIN_CHUNK;
+            let count = GRAIN_CHUNK.min(rows.len.saturating_sub(first));
+            let start = rows.start.wrapping_add(first).cast::<u8>().cast_const();
+            for line in (0..count * size_of::<T>()).step_by(64) {
+                prefetch_address(start.wrapping_add(line));
+            }
+        }
+        lines(&self.levels, chunk);
+        lines(&self.centers, chunk);
+        lines(&self.reach, chunk);
     }
 
     /// # Safety
