@@ -803,8 +803,8 @@ mod tests {
             assert_eq!(waiting.iter().sum::<usize>(), plan.waiting);
             assert!(waiting[1..].iter().all(|&w| w > 0), "{waiting:?}");
             let even = (chunks as f64 - 0.5 * plan.waiting as f64) / threads as f64;
-            for r in 0..threads {
-                let own = plan.run_chunks(r).len() as f64 - 0.5 * waiting[r] as f64;
+            for (r, &run_waiting) in waiting.iter().enumerate() {
+                let own = plan.run_chunks(r).len() as f64 - 0.5 * run_waiting as f64;
                 assert!(
                     (own - even).abs() <= 1.5,
                     "{threads} threads, run {r}: {own} chunks of its own, against {even}"
