@@ -617,6 +617,9 @@ pub struct World {
     /// The least first grain of each grain chunk's pairs
     /// ([`sweep::earliest_first_grains`]), recomputed with the list.
     earliest_first_grains: Vec<u32>,
+    /// How the sweep's tasks share the chunks, made with `earliest_first_grains` (and again
+    /// for another number of threads).
+    sweep_plan: SweepPlan,
     pub grain_stress: Vec<GrainStress>,
     pub totals: StepTotals,
     /// Each grain's model level (all at `params.level` unless the level is adaptive).
@@ -724,6 +727,7 @@ impl World {
             pair_contacts: Vec::new(),
             pair_chunk_ends: Vec::new(),
             earliest_first_grains: Vec::new(),
+            sweep_plan: SweepPlan::default(),
             grain_stress: vec![GrainStress::default(); n],
             totals: StepTotals::default(),
             levels: vec![GrainLevel::new(start); n],
@@ -996,6 +1000,8 @@ impl World {
                 .resize(pairs.len(), PairContact::default());
             self.pair_chunk_ends = pair_chunk_ends(pairs, n);
             self.earliest_first_grains = sweep::earliest_first_grains(&self.neighbors, n);
+            self.sweep_plan =
+                SweepPlan::new(&self.earliest_first_grains, rayon::current_num_threads());
         }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
@@ -1048,6 +1054,7 @@ impl World {
             pair_contacts,
             pair_chunk_ends,
             earliest_first_grains,
+            sweep_plan,
             ..
         } = self;
         let (params, contours, neighbors, fast) = (&*params, &*contours, &*neighbors, &*fast);
@@ -1059,6 +1066,7 @@ impl World {
             .friction
             .as_ref()
             .map_or([0.0; MAX_WALLS], |f| f.walls);
+        SweepPlan::for_threads(sweep_plan, earliest_first_grains);
         let rows = sweep::SweepRows {
             grains: GrainChunk {
                 grains,
@@ -1075,6 +1083,7 @@ impl World {
             pair_contacts,
             pair_chunk_ends,
             earliest_first_grains,
+            plan: sweep_plan,
         };
         let swept = sweep::sweep(rows, |views| {
             let pair_pass = pairs::PairPass {

@@ -160,6 +160,9 @@ pub(super) struct SweepRows<'a> {
     pub pair_chunk_ends: &'a [usize],
     /// The least first grain of each grain chunk's pairs ([`earliest_first_grains`]).
     pub earliest_first_grains: &'a [u32],
+    /// How the tasks share the chunks: made with `earliest_first_grains` for the pool's
+    /// threads ([`SweepPlan::for_threads`]).
+    pub plan: &'a SweepPlan,
 }
 
 /// What the sweep reads while it writes the rows (built from their views: the frames for the
@@ -185,8 +188,10 @@ struct ChunkResults {
 pub(super) struct SweepResults {
     chunks: Vec<ChunkResults>,
     pub pair_share: f64,
-    /// How the tasks shared the chunks.
-    pub plan: SweepPlan,
+    /// Whether the grains followed their pairs (see [`SweepPlan::fused`]), and how many
+    /// chunks waited.
+    pub fused: bool,
+    pub waiting: usize,
     /// The seconds the sweep's tasks spent on chunks, summed, and the sweep's wall-clock
     /// seconds times its threads: their ratio is how busy the threads were.
     pub busy_seconds: f64,
@@ -277,16 +282,19 @@ pub(super) fn sweep<'a>(
         pair_chunk_ends: rows.pair_chunk_ends,
     };
     let mut results: Vec<ChunkResults> = (0..chunks).map(|_| ChunkResults::default()).collect();
-    let plan = SweepPlan::new(rows.earliest_first_grains, rayon::current_num_threads());
+    let plan = rows.plan;
+    assert!(
+        plan.chunks == chunks && plan.threads == rayon::current_num_threads(),
+        "the sweep's plan is for {} chunks on {} threads, not {chunks} on {}",
+        plan.chunks,
+        plan.threads,
+        rayon::current_num_threads()
+    );
     let runs = plan.runs();
     let run_chunks = |r: usize| plan.run_chunks(r);
     let efg = rows.earliest_first_grains;
     let waiting_in = |r: usize, chunk: usize| waits_from(efg, chunk, plan.starts[r]);
-    // The chunks whose grains wait (none on one thread, or with the passes apart), in order:
-    // run r's are those within its run.
-    let waiting_chunks: Vec<usize> = (0..runs)
-        .flat_map(|r| run_chunks(r).filter(move |&c| plan.fused && waiting_in(r, c)))
-        .collect();
+    let waiting_chunks = &plan.waiting_chunks;
     let waiting_of = |r: usize| {
         let run = run_chunks(r);
         &waiting_chunks[waiting_chunks.partition_point(|&c| c < run.start)
@@ -414,7 +422,8 @@ pub(super) fn sweep<'a>(
     SweepResults {
         chunks: results,
         pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
-        plan,
+        fused: plan.fused,
+        waiting: plan.waiting,
         busy_seconds: pair_seconds + grain_seconds,
         thread_seconds: sweep_start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64,
     }
@@ -466,11 +475,10 @@ pub struct SweepTally {
 
 impl SweepTally {
     pub(super) fn add(&mut self, swept: &SweepResults) {
-        let plan = &swept.plan;
         self.sweeps += 1;
-        self.two_passes += u64::from(!plan.fused);
-        self.waiting_chunks += plan.waiting as u64;
-        self.chunks = plan.chunks;
+        self.two_passes += u64::from(!swept.fused);
+        self.waiting_chunks += swept.waiting as u64;
+        self.chunks = swept.chunks.len();
         self.busy_seconds += swept.busy_seconds;
         self.thread_seconds += swept.thread_seconds;
     }
@@ -521,6 +529,10 @@ pub struct SweepPlan {
     /// `starts[r]..starts[r + 1]`, one run a thread, so that one thread sweeps every chunk at
     /// once.
     starts: Vec<usize>,
+    /// The chunks whose grains wait, in order, where the passes are fused (else none).
+    waiting_chunks: Vec<usize>,
+    /// The threads it is made for.
+    threads: usize,
     pub chunks: usize,
     /// The chunks whose grains would wait, with the passes fused (see
     /// [`SweepPlan::waits`]; on one thread, none): what decides `fused`.
@@ -532,7 +544,7 @@ pub struct SweepPlan {
 }
 
 impl SweepPlan {
-    fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
+    pub(super) fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
         let chunks = earliest_first_grains.len();
         let run = chunks.div_ceil(threads.max(1)).max(1);
         let even: Vec<usize> = (0..chunks.div_ceil(run))
@@ -563,19 +575,35 @@ impl SweepPlan {
         starts.push(chunks);
         let mut plan = Self {
             starts,
+            waiting_chunks: Vec::new(),
+            threads,
             chunks,
             waiting: 0,
             fused: false,
         };
-        plan.waiting = (0..chunks)
+        let waiting_chunks: Vec<usize> = (0..chunks)
             .filter(|&c| plan.waits(earliest_first_grains, c))
-            .count();
+            .collect();
+        plan.waiting = waiting_chunks.len();
         // The chunks that wait are the later runs' own: while their grains wait, the first
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
         // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
         // 0.86 times as fast as with the two passes).
         plan.fused = plan.waiting * MOST_WAITING <= chunks;
+        if plan.fused {
+            plan.waiting_chunks = waiting_chunks;
+        }
         plan
+    }
+
+    /// `plan`, made again where it was made for other chunks or another number of threads
+    /// than the pool's (the world keeps it from one list build to the next: making it each
+    /// step allocated).
+    pub(super) fn for_threads(plan: &mut Self, earliest_first_grains: &[u32]) {
+        let threads = rayon::current_num_threads();
+        if plan.threads != threads || plan.chunks != earliest_first_grains.len() {
+            *plan = Self::new(earliest_first_grains, threads);
+        }
     }
 
     /// The runs of chunks, one a task.
