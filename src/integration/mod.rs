@@ -1000,8 +1000,8 @@ impl World {
                 .resize(pairs.len(), PairContact::default());
             self.pair_chunk_ends = pair_chunk_ends(pairs, n);
             self.earliest_first_grains = sweep::earliest_first_grains(&self.neighbors, n);
-            self.sweep_plan =
-                SweepPlan::new(&self.earliest_first_grains, rayon::current_num_threads());
+            // Made again for the new list before the sweep.
+            self.sweep_plan = SweepPlan::default();
         }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
@@ -1066,7 +1066,7 @@ impl World {
             .friction
             .as_ref()
             .map_or([0.0; MAX_WALLS], |f| f.walls);
-        SweepPlan::for_threads(sweep_plan, earliest_first_grains);
+        sweep_plan.refresh(earliest_first_grains);
         let rows = sweep::SweepRows {
             grains: GrainChunk {
                 grains,

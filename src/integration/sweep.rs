@@ -161,7 +161,7 @@ pub(super) struct SweepRows<'a> {
     /// The least first grain of each grain chunk's pairs ([`earliest_first_grains`]).
     pub earliest_first_grains: &'a [u32],
     /// How the tasks share the chunks: made with `earliest_first_grains` for the pool's
-    /// threads ([`SweepPlan::for_threads`]).
+    /// threads ([`SweepPlan::refresh`]).
     pub plan: &'a SweepPlan,
 }
 
@@ -596,13 +596,13 @@ impl SweepPlan {
         plan
     }
 
-    /// `plan`, made again where it was made for other chunks or another number of threads
-    /// than the pool's (the world keeps it from one list build to the next: making it each
-    /// step allocated).
-    pub(super) fn for_threads(plan: &mut Self, earliest_first_grains: &[u32]) {
+    /// Makes the plan again where it is not one for the pool's threads and these chunks (the
+    /// world keeps it from one step to the next, and drops it with each list build: making it
+    /// each step allocated). The default plan is for no threads.
+    pub(super) fn refresh(&mut self, earliest_first_grains: &[u32]) {
         let threads = rayon::current_num_threads();
-        if plan.threads != threads || plan.chunks != earliest_first_grains.len() {
-            *plan = Self::new(earliest_first_grains, threads);
+        if self.threads != threads || self.chunks != earliest_first_grains.len() {
+            *self = Self::new(earliest_first_grains, threads);
         }
     }
 
@@ -814,8 +814,9 @@ mod tests {
     fn runs_with_waiting_chunks_are_longer_by_half_of_them() {
         // Expectation: the runs cover the chunks in order, one a thread; a run's waiting
         // grains are shared at the end of the sweep, so each run's own work (its chunks less
-        // half its waiting ones, the grain pass's share) is the same but for the rounding of
-        // the runs' ends to whole chunks (at most one chunk either side of the even share).
+        // half its waiting ones, the grain pass's share) is the even share but for the
+        // rounding of the run's two ends to whole chunks (half a chunk each) and a waiting
+        // chunk gained or lost as its start moved (half a chunk): 1.5 chunks at most.
         for threads in [2, 3, 4] {
             let mut world = packing(ModelLevel::Rigid, false);
             world.step().unwrap();
