@@ -160,6 +160,116 @@ impl<const N: usize> Real for Lanes<N> {
     }
 }
 
+/// Which vector instructions the kernels take where the processor has AVX-512, as the
+/// environment variable `SDEM_SIMD` asks (`auto`, the default; `avx`; `avx512`). Every choice
+/// gives the same bits (the kernels compute the same operations in the same order, only more
+/// lanes at a time); it changes the speed only.
+///
+/// `auto` runs the eight-lane polygon kernel in AVX-512 everywhere, and the pair pass's loop and
+/// its disc kernels (square roots and divisions in every lane) in AVX-512 except on Intel's
+/// processors, which lower their clock for such instructions (Intel's "AVX-512 frequency
+/// licences"): measured on an Ice Lake Xeon (issue #16, forty-first session), one thread,
+/// the pair loop and disc kernels in AVX rather than AVX-512 ran rigid discs 1.09-1.12 times as
+/// fast and the full level as fast (0.99), while on an AMD Zen 5 their AVX-512 forms had been
+/// 4-7% faster.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Simd {
+    /// AVX-512 where it was measured to pay on this processor's maker.
+    Auto,
+    /// AVX at most (four lanes in 256-bit registers), never AVX-512.
+    Avx,
+    /// AVX-512 wherever a kernel has an AVX-512 form and the processor runs it.
+    Avx512,
+}
+
+/// `SDEM_SIMD` holds a value other than `auto`, `avx` or `avx512`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("SDEM_SIMD={0:?}: expected auto, avx or avx512 (unset means auto)")]
+pub struct UnknownSimd(pub String);
+
+impl Simd {
+    /// The choice that `SDEM_SIMD` holds (`auto` where it is unset or empty).
+    pub fn from_env() -> Result<Self, UnknownSimd> {
+        match std::env::var("SDEM_SIMD").as_deref() {
+            Err(_) | Ok("") | Ok("auto") => Ok(Self::Auto),
+            Ok("avx") => Ok(Self::Avx),
+            Ok("avx512") => Ok(Self::Avx512),
+            Ok(other) => Err(UnknownSimd(other.to_string())),
+        }
+    }
+
+    /// This process's choice, read from `SDEM_SIMD` once (`auto` where it does not parse: the
+    /// command line checks it first, with [`from_env`](Self::from_env)).
+    pub fn chosen() -> Self {
+        static CHOSEN: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
+        *CHOSEN.get_or_init(|| Self::from_env().unwrap_or(Self::Auto))
+    }
+
+    /// Whether the pair pass's loop and its disc kernels run in AVX-512 on this processor.
+    pub fn discs_in_avx512() -> bool {
+        static DISCS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *DISCS.get_or_init(|| {
+            has_avx512()
+                && match Self::chosen() {
+                    Self::Avx => false,
+                    Self::Avx512 => true,
+                    Self::Auto => !made_by_intel(),
+                }
+        })
+    }
+
+    /// Whether the eight-lane polygon kernel may run in AVX-512 (where the processor has it).
+    pub fn polygons_in_avx512() -> bool {
+        Self::chosen() != Self::Avx
+    }
+
+    /// What the kernels run in on this processor, for a run's report.
+    pub fn describe() -> String {
+        let width = |avx512: bool| if avx512 { "AVX-512" } else { "AVX" };
+        if !has_avx() {
+            return "no AVX: one pair at a time".to_string();
+        }
+        format!(
+            "pair loop and discs {}, polygons {} (SDEM_SIMD={})",
+            width(Self::discs_in_avx512()),
+            width(has_avx512() && Self::polygons_in_avx512()),
+            match Self::chosen() {
+                Self::Auto => "auto",
+                Self::Avx => "avx",
+                Self::Avx512 => "avx512",
+            }
+        )
+    }
+}
+
+fn has_avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx512f");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// Whether the processor's maker is Intel (its CPUID vendor string).
+fn made_by_intel() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        // SAFETY: CPUID leaf 0 exists on every x86-64 processor.
+        #[allow(unused_unsafe)]
+        let leaf = unsafe { std::arch::x86_64::__cpuid(0) };
+        // "GenuineIntel" in EBX, EDX, ECX.
+        [leaf.ebx, leaf.edx, leaf.ecx] == [0x756e_6547, 0x4965_6e69, 0x6c65_746e]
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Moving records into lanes and back with AVX registers.
 #[cfg(target_arch = "x86_64")]
 pub mod avx {

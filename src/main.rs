@@ -94,7 +94,8 @@ enum Command {
         checkpoint_every_seconds: Option<f64>,
     },
     /// Time the SDEM step on a dense packing (phi ~ 0.9, nu = 0.5, dbeta = 1 degree), at the full
-    /// SDEM level or (`--model`) another.
+    /// SDEM level or (`--model`) another. The environment variable SDEM_SIMD (auto, avx,
+    /// avx512) picks the vector instructions of every command; results are the same bits.
     Bench {
         /// Number of grains (rounded up to full lattice rows).
         #[arg(long, default_value_t = 10_000)]
@@ -362,6 +363,9 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    // A tuning knob, not physics (every choice gives the same bits), but a misspelt one should
+    // not pass for the default.
+    sdem::lanes::Simd::from_env()?;
     match cli.command {
         Command::Run {
             scenario,
@@ -566,6 +570,7 @@ fn run(cli: Cli) -> Result<()> {
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());
             println!("time by pass: {}", result.phases);
             println!("sweep: {}", result.sweeps);
+            println!("vector lanes: {}", sdem::lanes::Simd::describe());
         }
         Command::Calibrate {
             assembly,

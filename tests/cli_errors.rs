@@ -1481,3 +1481,20 @@ fn sort_sample_on_bad_input() {
         &["cannot write", "out.csv"],
     );
 }
+
+#[test]
+fn an_unknown_vector_instruction_choice_is_refused() {
+    // Expectation: SDEM_SIMD takes auto, avx or avx512; a misspelt value fails at once, naming
+    // the value and the allowed ones, rather than passing for the default.
+    let out = Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .args(["bench", "--grains", "100", "--steps", "1"])
+        .env("SDEM_SIMD", "avx2")
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("starting the sdem binary");
+    let stderr = clean_failure("SDEM_SIMD=avx2", &out);
+    assert!(
+        stderr.contains("SDEM_SIMD=\"avx2\"") && stderr.contains("auto, avx or avx512"),
+        "{stderr}"
+    );
+}

@@ -71,3 +71,41 @@ fn a_meshfree_run_does_not_depend_on_the_processors_floating_point_features() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/meshfree_bouncing_disc.ron");
     assert_same_without_fma(&scenario, &dir);
 }
+
+#[test]
+fn an_sdem_run_gives_the_same_bits_in_avx_and_avx512_lanes() {
+    // Expectation: the kernels compute the same operations in the same order whatever the
+    // vector width (`sdem::lanes::Simd`), so SDEM_SIMD changes the speed, never the outputs.
+    // Where the processor lacks AVX-512 both runs take AVX and the test cannot tell.
+    let dir = temp_dir("machine", "simd");
+    let scenario = dir.join("small.ron");
+    std::fs::write(&scenario, SMALL_COMPACTION).unwrap();
+    let run = |choice: &str| {
+        let out = dir.join(choice);
+        let status = Command::new(env!("CARGO_BIN_EXE_sdem"))
+            .args(["run", "--quiet", "--out"])
+            .arg(&out)
+            .arg(&scenario)
+            .env("SDEM_SIMD", choice)
+            .output()
+            .unwrap();
+        assert!(
+            status.status.success(),
+            "{}",
+            String::from_utf8_lossy(&status.stderr)
+        );
+        out
+    };
+    let (avx, avx512) = (run("avx"), run("avx512"));
+    for file in ["macro.csv", "grains.csv"] {
+        let (a, b) = (
+            std::fs::read(avx.join(file)).unwrap(),
+            std::fs::read(avx512.join(file)).unwrap(),
+        );
+        assert!(
+            a.iter().filter(|&&c| c == b'\n').count() >= 2,
+            "{file}: no rows"
+        );
+        assert!(a == b, "{file} differs between SDEM_SIMD=avx and avx512");
+    }
+}

@@ -188,10 +188,15 @@ impl BlockKernel {
         kernels
     }
 
-    /// The fastest kernel this processor runs, `None` without AVX.
+    /// The fastest kernel this processor runs, `None` without AVX; AVX where `SDEM_SIMD=avx`
+    /// (see [`Simd`](crate::lanes::Simd)).
     pub fn best() -> Option<BlockKernel> {
         static BEST: std::sync::OnceLock<Option<BlockKernel>> = std::sync::OnceLock::new();
-        *BEST.get_or_init(|| Self::available().pop())
+        *BEST.get_or_init(|| {
+            Self::available()
+                .into_iter()
+                .rfind(|k| k.0 != Width::Avx512 || crate::lanes::Simd::polygons_in_avx512())
+        })
     }
 
     /// The kernel's name, as benches and notes give it.

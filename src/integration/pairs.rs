@@ -113,8 +113,8 @@ impl<'a> PairPass<'a> {
     ) -> PairSums {
         let slots = (states, actives, records);
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor has AVX-512 (tested just above).
+        if crate::lanes::Simd::discs_in_avx512() {
+            // SAFETY: the processor has AVX-512 (`discs_in_avx512` holds only there).
             return unsafe { self.chunk_avx512(first_pair, slots) };
         }
         self.chunk_in(first_pair, slots)
@@ -1244,8 +1244,8 @@ impl DiscPairs<PairLanes> {
     #[inline(always)]
     fn set_circles(&mut self, ends: &[(&Frame, &Frame); LANES]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor has AVX-512 (tested just above).
+        if crate::lanes::Simd::discs_in_avx512() {
+            // SAFETY: the processor has AVX-512 (`discs_in_avx512` holds only there).
             unsafe { self.set_circles_avx512(ends) };
             return;
         }
@@ -1580,8 +1580,8 @@ impl DiscPairForces<PairLanes> {
     #[inline(always)]
     fn contacts_if_regular(&self, radius: [&PairLanes; 2]) -> Option<[bool; LANES]> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor has AVX-512 (tested just above).
+        if crate::lanes::Simd::discs_in_avx512() {
+            // SAFETY: the processor has AVX-512 (`discs_in_avx512` holds only there).
             return unsafe { self.contacts_if_regular_avx512(radius) };
         }
         #[cfg(target_arch = "x86_64")]
@@ -1702,8 +1702,8 @@ pub fn disc_pair_forces_dispatch(
     out: &mut DiscPairForces<PairLanes>,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx512f") {
-        // SAFETY: the processor has AVX-512 (tested just above).
+    if crate::lanes::Simd::discs_in_avx512() {
+        // SAFETY: the processor has AVX-512 (`discs_in_avx512` holds only there).
         unsafe { disc_pair_forces_avx512(input, law, damping_ratio, out) };
         return;
     }
