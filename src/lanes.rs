@@ -167,11 +167,13 @@ impl<const N: usize> Real for Lanes<N> {
 ///
 /// `auto` runs the eight-lane polygon kernel in AVX-512 everywhere, and the pair pass's loop and
 /// its disc kernels (square roots and divisions in every lane) in AVX-512 except on Intel's
-/// processors, which lower their clock for such instructions (Intel's "AVX-512 frequency
-/// licences"): measured on an Ice Lake Xeon (issue #16, forty-first session), one thread,
-/// the pair loop and disc kernels in AVX rather than AVX-512 ran rigid discs 1.09-1.12 times as
-/// fast and the full level as fast (0.99), while on an AMD Zen 5 their AVX-512 forms had been
-/// 4-7% faster.
+/// processors. Measured on an Ice Lake Xeon (issue #16, forty-first session): the pair loop and
+/// disc kernels in AVX rather than AVX-512 ran rigid discs 1.09-1.12 times as fast on one
+/// thread and 1.10-1.17 on two, the full level as fast (0.99); on an AMD Zen 5 their AVX-512
+/// forms had been 2-5% faster each. The likely cause: Intel's server cores lower their clock
+/// while they run heavy AVX-512 arithmetic (the "AVX-512 frequency licences" of Intel's
+/// optimization manual), and divisions and square roots gain nothing per lane from the wider
+/// registers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Simd {
     /// AVX-512 where it was measured to pay on this processor's maker.
