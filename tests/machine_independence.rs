@@ -16,41 +16,51 @@
 mod common;
 
 use common::{SMALL_COMPACTION, temp_dir};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// Runs `scenario` into `dir/name` with the environment variable `var` set (none for `None`),
+/// and returns that folder.
+fn run_with(scenario: &Path, dir: &Path, name: &str, var: Option<(&str, &str)>) -> PathBuf {
+    let out = dir.join(name);
+    let mut command = Command::new(env!("CARGO_BIN_EXE_sdem"));
+    command
+        .args(["run", "--quiet", "--out"])
+        .arg(&out)
+        .arg(scenario);
+    if let Some((key, value)) = var {
+        command.env(key, value);
+    }
+    let status = command.output().unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    out
+}
+
+/// Asserts that the runs in folders `a` and `b` wrote the same macro.csv and grains.csv, with
+/// rows below their headers; `what` names the difference between the runs.
+fn assert_same_outputs(a: &Path, b: &Path, what: &str) {
+    for file in ["macro.csv", "grains.csv"] {
+        let (a, b) = (
+            std::fs::read(a.join(file)).unwrap(),
+            std::fs::read(b.join(file)).unwrap(),
+        );
+        let rows = a.iter().filter(|&&c| c == b'\n').count();
+        assert!(rows >= 2, "{file}: {rows} lines, no row below the header");
+        assert!(a == b, "{file} differs {what}");
+    }
+}
 
 /// Runs `scenario` natively and without glibc's FMA variants, in `dir`, and asserts that both
 /// runs wrote the same macro.csv and grains.csv.
 fn assert_same_without_fma(scenario: &Path, dir: &Path) {
-    let run = |name: &str, tunables: Option<&str>| {
-        let out = dir.join(name);
-        let mut command = Command::new(env!("CARGO_BIN_EXE_sdem"));
-        command
-            .args(["run", "--quiet", "--out"])
-            .arg(&out)
-            .arg(scenario);
-        if let Some(tunables) = tunables {
-            command.env("GLIBC_TUNABLES", tunables);
-        }
-        let status = command.output().unwrap();
-        assert!(
-            status.status.success(),
-            "{}",
-            String::from_utf8_lossy(&status.stderr)
-        );
-        out
-    };
-    let native = run("native", None);
-    let without_fma = run("without_fma", Some("glibc.cpu.hwcaps=-AVX2,-FMA"));
-    for file in ["macro.csv", "grains.csv"] {
-        let (a, b) = (
-            std::fs::read(native.join(file)).unwrap(),
-            std::fs::read(without_fma.join(file)).unwrap(),
-        );
-        let rows = a.iter().filter(|&&c| c == b'\n').count();
-        assert!(rows >= 2, "{file}: {rows} lines, no row below the header");
-        assert!(a == b, "{file} differs without FMA");
-    }
+    let native = run_with(scenario, dir, "native", None);
+    let tunables = ("GLIBC_TUNABLES", "glibc.cpu.hwcaps=-AVX2,-FMA");
+    let without_fma = run_with(scenario, dir, "without_fma", Some(tunables));
+    assert_same_outputs(&native, &without_fma, "without FMA");
 }
 
 #[test]
@@ -80,32 +90,7 @@ fn an_sdem_run_gives_the_same_bits_in_avx_and_avx512_lanes() {
     let dir = temp_dir("machine", "simd");
     let scenario = dir.join("small.ron");
     std::fs::write(&scenario, SMALL_COMPACTION).unwrap();
-    let run = |choice: &str| {
-        let out = dir.join(choice);
-        let status = Command::new(env!("CARGO_BIN_EXE_sdem"))
-            .args(["run", "--quiet", "--out"])
-            .arg(&out)
-            .arg(&scenario)
-            .env("SDEM_SIMD", choice)
-            .output()
-            .unwrap();
-        assert!(
-            status.status.success(),
-            "{}",
-            String::from_utf8_lossy(&status.stderr)
-        );
-        out
-    };
-    let (avx, avx512) = (run("avx"), run("avx512"));
-    for file in ["macro.csv", "grains.csv"] {
-        let (a, b) = (
-            std::fs::read(avx.join(file)).unwrap(),
-            std::fs::read(avx512.join(file)).unwrap(),
-        );
-        assert!(
-            a.iter().filter(|&&c| c == b'\n').count() >= 2,
-            "{file}: no rows"
-        );
-        assert!(a == b, "{file} differs between SDEM_SIMD=avx and avx512");
-    }
+    let avx = run_with(&scenario, &dir, "avx", Some(("SDEM_SIMD", "avx")));
+    let avx512 = run_with(&scenario, &dir, "avx512", Some(("SDEM_SIMD", "avx512")));
+    assert_same_outputs(&avx, &avx512, "between SDEM_SIMD=avx and avx512");
 }
