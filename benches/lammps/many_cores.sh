@@ -62,7 +62,7 @@ for model in rigid full; do
   for t in "$p" 1; do
     steps=40; [ $model = full ] && steps=12
     r=$(peak timeout 120 "$sdem" bench --grains 1000000 --steps $steps --warmup 5 --threads "$t" --model $model 2>&1)
-    say "sdem bench N=10^6 model=$model threads=$t: $(echo "$r" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$r" | grep -o 'frames .*') | $(echo "$r" | tail -1)"
+    say "sdem bench N=10^6 model=$model threads=$t: $(echo "$r" | grep -o 'grain-steps/s: [0-9.e+]*') | $(echo "$r" | grep -o 'frames .*') | $(echo "$r" | grep -o 'vector lanes: .*') | $(echo "$r" | tail -1)"
   done
 done
 # 4. The order of a sample file: LAMMPS's packing (work/dense_100000.data) as rigid sdem discs
