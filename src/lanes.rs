@@ -225,30 +225,29 @@ impl Simd {
         Self::chosen() != Self::Avx
     }
 
-    /// What the kernels run in on this processor, for a run's report.
+    /// What the kernels run in on this processor, for a run's report: the polygon kernel as
+    /// the pair pass takes it ([`BlockKernel::best`]).
+    ///
+    /// [`BlockKernel::best`]: crate::geometry::intersection_lanes::BlockKernel::best
     pub fn describe() -> String {
-        let width = |avx512: bool| if avx512 { "AVX-512" } else { "AVX" };
-        if !has_avx() {
+        let Some(polygons) = crate::geometry::intersection_lanes::BlockKernel::best() else {
             return "no AVX: one pair at a time".to_string();
-        }
+        };
+        let discs = if Self::discs_in_avx512() {
+            "AVX-512"
+        } else {
+            "AVX"
+        };
+        let chosen = match Self::chosen() {
+            Self::Auto => "auto",
+            Self::Avx => "avx",
+            Self::Avx512 => "avx512",
+        };
         format!(
-            "pair loop and discs {}, polygons {} (SDEM_SIMD={})",
-            width(Self::discs_in_avx512()),
-            width(has_avx512() && Self::polygons_in_avx512()),
-            match Self::chosen() {
-                Self::Auto => "auto",
-                Self::Avx => "avx",
-                Self::Avx512 => "avx512",
-            }
+            "pair loop and discs {discs}, polygons {} (SDEM_SIMD={chosen})",
+            polygons.name()
         )
     }
-}
-
-fn has_avx() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx");
-    #[cfg(not(target_arch = "x86_64"))]
-    false
 }
 
 fn has_avx512() -> bool {
