@@ -192,6 +192,8 @@ pub(super) struct SweepResults {
     /// chunks waited.
     pub fused: bool,
     pub waiting: usize,
+    /// The runs the threads took.
+    pub runs: usize,
     /// The seconds the sweep's tasks spent on chunks, summed, and the sweep's wall-clock
     /// seconds times its threads: their ratio is how busy the threads were.
     pub busy_seconds: f64,
@@ -344,7 +346,7 @@ pub(super) fn sweep<'a>(
             while take_waiting() {}
         }
     };
-    (0..runs).into_par_iter().for_each(|r| {
+    let sweep_run = |r: usize| {
         states[r].started.store(true, Ordering::Release);
         let mut failed = false;
         let last_waiting = waiting_of(r).last().copied();
@@ -379,28 +381,44 @@ pub(super) fn sweep<'a>(
             }
         }
         states[r].ended.store(true, Ordering::Release);
-        // Help with the waiting grains while another task still runs (it waits on nothing,
-        // so this ends); a run not yet started is left to whichever task takes it, which then
-        // ends the last of its waits itself.
-        let mut spins = 0u32;
-        loop {
-            if take_waiting() {
-                continue;
+    };
+    // The tasks take the runs in order, each the next one left as it ends one: a thread that
+    // runs slower (a core shared with another program) takes fewer of them (issue #16: with
+    // one run a thread, the threads were busy 93% of the sweep of the 10⁵ run on the Intel
+    // machine, whose two cores ran at unequal speeds).
+    let next_run = AtomicUsize::new(0);
+    (0..plan.threads.clamp(1, runs))
+        .into_par_iter()
+        .for_each(|_| {
+            loop {
+                let r = next_run.fetch_add(1, Ordering::Relaxed);
+                if r >= runs {
+                    break;
+                }
+                sweep_run(r);
             }
-            let running = states.iter().any(|state| {
-                state.started.load(Ordering::Acquire) && !state.ended.load(Ordering::Acquire)
-            });
-            if !running || any_failed.load(Ordering::Acquire) {
-                break;
+            // Help with the waiting grains while another task still runs (it waits on nothing,
+            // so this ends); a run taken but not yet started is left to the task that took it,
+            // which then ends the last of its waits itself.
+            let mut spins = 0u32;
+            loop {
+                if take_waiting() {
+                    continue;
+                }
+                let running = states.iter().any(|state| {
+                    state.started.load(Ordering::Acquire) && !state.ended.load(Ordering::Acquire)
+                });
+                if !running || any_failed.load(Ordering::Acquire) {
+                    break;
+                }
+                spins += 1;
+                if spins.is_multiple_of(64) {
+                    std::thread::yield_now();
+                } else {
+                    std::hint::spin_loop();
+                }
             }
-            spins += 1;
-            if spins.is_multiple_of(64) {
-                std::thread::yield_now();
-            } else {
-                std::hint::spin_loop();
-            }
-        }
-    });
+        });
     let failed = results.iter().any(|result| result.pairs.failure.is_some());
     if !failed && results.iter().any(|result| result.grains.is_none()) {
         // The passes one after the other: every pair is done, and no pair pass reads a frame
@@ -424,6 +442,7 @@ pub(super) fn sweep<'a>(
         pair_share: pair_seconds / (pair_seconds + grain_seconds).max(f64::MIN_POSITIVE),
         fused: plan.fused,
         waiting: plan.waiting,
+        runs,
         busy_seconds: pair_seconds + grain_seconds,
         thread_seconds: sweep_start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64,
     }
@@ -467,8 +486,9 @@ pub struct SweepTally {
     pub sweeps: u64,
     pub two_passes: u64,
     pub waiting_chunks: u64,
-    /// The chunks of the last sweep.
+    /// The chunks of the last sweep, and the runs its threads took.
     pub chunks: usize,
+    pub runs: usize,
     pub busy_seconds: f64,
     pub thread_seconds: f64,
 }
@@ -479,6 +499,7 @@ impl SweepTally {
         self.two_passes += u64::from(!swept.fused);
         self.waiting_chunks += swept.waiting as u64;
         self.chunks = swept.chunks.len();
+        self.runs = swept.runs;
         self.busy_seconds += swept.busy_seconds;
         self.thread_seconds += swept.thread_seconds;
     }
@@ -501,22 +522,25 @@ impl SweepTally {
             two_passes: self.two_passes - before.two_passes,
             waiting_chunks: self.waiting_chunks - before.waiting_chunks,
             chunks: self.chunks,
+            runs: self.runs,
             busy_seconds: self.busy_seconds - before.busy_seconds,
             thread_seconds: self.thread_seconds - before.thread_seconds,
         }
     }
 }
 
-/// "300 sweeps, 0 in two passes; 6.0 of 391 chunks waited (mean); threads busy 97.1%".
+/// "300 sweeps, 0 in two passes; 6.0 of 391 chunks waited (mean), 2 runs; threads busy 97.1%".
 impl std::fmt::Display for SweepTally {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} sweeps, {} in two passes; {:.1} of {} chunks waited (mean); threads busy {:.1}%",
+            "{} sweeps, {} in two passes; {:.1} of {} chunks waited (mean), {} runs; threads \
+             busy {:.1}%",
             self.sweeps,
             self.two_passes,
             self.mean_waiting_chunks(),
             self.chunks,
+            self.runs,
             100.0 * self.busy_share()
         )
     }
@@ -526,8 +550,9 @@ impl std::fmt::Display for SweepTally {
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct SweepPlan {
     /// Where each task's run of chunks starts, and the chunks' end: run `r` is
-    /// `starts[r]..starts[r + 1]`, one run a thread, so that one thread sweeps every chunk at
-    /// once.
+    /// `starts[r]..starts[r + 1]`: one run a thread, or runs that shrink towards the sweep's
+    /// end, which the threads take in order as they come free. On one thread, one run: it
+    /// sweeps every chunk at once.
     starts: Vec<usize>,
     /// The chunks whose grains wait, in order, where the passes are fused (else none).
     waiting_chunks: Vec<usize>,
@@ -545,6 +570,41 @@ pub struct SweepPlan {
 
 impl SweepPlan {
     pub(super) fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
+        let even = Self::even(earliest_first_grains, threads);
+        let chunks = earliest_first_grains.len();
+        if threads <= 1 || chunks < 4 * (threads + 1) * GUIDED_MIN_RUN {
+            return even;
+        }
+        // Runs that shrink towards the sweep's end, which the threads take as they come free,
+        // where few enough chunks wait: each run's start is a front that the chunks after it
+        // wait on (two chunks on a lattice numbered row by row, some twenty on a sample along
+        // a space-filling curve at 10⁵ grains). Their waiting grains are taken as soon as the
+        // runs before them end, by whichever thread is free, so that more of them wait than
+        // one run a thread lets wait (issue #16: 82 of 391 chunks on the 10⁵ run's gas, two
+        // threads, busy 98.6% of the sweep against 95.2% with one run a thread).
+        let guided = Self::guided(
+            earliest_first_grains,
+            threads,
+            GUIDED_MIN_RUN,
+            MOST_WAITING_GUIDED,
+        );
+        if guided.fused { guided } else { even }
+    }
+
+    /// Runs that shrink towards the sweep's end ([`guided_starts`]), fused unless more than
+    /// one chunk in `most_waiting` waits.
+    fn guided(
+        earliest_first_grains: &[u32],
+        threads: usize,
+        min_run: usize,
+        most_waiting: usize,
+    ) -> Self {
+        let starts = guided_starts(earliest_first_grains.len(), threads, min_run);
+        Self::with_starts(earliest_first_grains, threads, starts, most_waiting)
+    }
+
+    /// One run a thread, each the same work but for its waiting chunks.
+    fn even(earliest_first_grains: &[u32], threads: usize) -> Self {
         let chunks = earliest_first_grains.len();
         let run = chunks.div_ceil(threads.max(1)).max(1);
         let even: Vec<usize> = (0..chunks.div_ceil(run))
@@ -573,6 +633,18 @@ impl SweepPlan {
             end += own_work + 0.5 * w as f64;
         }
         starts.push(chunks);
+        Self::with_starts(earliest_first_grains, threads, starts, MOST_WAITING)
+    }
+
+    /// The plan whose runs start at `starts` (and end at the chunks' end, `starts`' last),
+    /// fused unless more than one chunk in `most_waiting` waits.
+    fn with_starts(
+        earliest_first_grains: &[u32],
+        threads: usize,
+        starts: Vec<usize>,
+        most_waiting: usize,
+    ) -> Self {
+        let chunks = earliest_first_grains.len();
         let mut plan = Self {
             starts,
             waiting_chunks: Vec::new(),
@@ -589,7 +661,7 @@ impl SweepPlan {
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
         // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
         // 0.86 times as fast as with the two passes).
-        plan.fused = plan.waiting * MOST_WAITING <= chunks;
+        plan.fused = plan.waiting * most_waiting <= chunks;
         if plan.fused {
             plan.waiting_chunks = waiting_chunks;
         }
@@ -627,6 +699,37 @@ impl SweepPlan {
 /// The sweep takes the two passes one after the other where more than one chunk in
 /// `MOST_WAITING` would wait.
 const MOST_WAITING: usize = 8;
+
+/// The runs that shrink towards the sweep's end are taken where no more than one chunk in
+/// `MOST_WAITING_GUIDED` waits, else one run a thread.
+const MOST_WAITING_GUIDED: usize = 4;
+
+/// The shortest of the runs that shrink towards the sweep's end, in chunks: fewer runs, fewer
+/// fronts to wait on (issue #16: on the Intel machine, two threads, runs down to 4, 8 or 16
+/// chunks kept the threads busy 97–99% of the sweep against 95–97% with one run a thread; the
+/// threads' time on the chunks moved by up to 8% from one sitting to the next, more than it
+/// differed between them).
+const GUIDED_MIN_RUN: usize = 8;
+
+/// Runs that shrink towards the sweep's end, for `threads` threads: each takes a share
+/// `1 / (threads + 1)` of the chunks left, but no fewer than `min_run` chunks, and the last
+/// takes what is left where less than `min_run` chunks would follow it. The threads take the
+/// first ones together, then each the next as it comes free: the last runs, short, even out
+/// the threads' ends.
+fn guided_starts(chunks: usize, threads: usize, min_run: usize) -> Vec<usize> {
+    let mut starts = vec![0];
+    let mut start = 0;
+    while start < chunks {
+        let left = chunks - start;
+        let mut size = left.div_ceil(threads + 1).max(min_run).min(left);
+        if left - size < min_run {
+            size = left;
+        }
+        start += size;
+        starts.push(start);
+    }
+    starts
+}
 
 /// Whether the grains of chunk `chunk`, in a run that starts at chunk `run_start`, wait for
 /// the earlier runs: whether one of its pairs has its first grain before the run.
@@ -846,6 +949,52 @@ mod tests {
     }
 
     #[test]
+    fn guided_runs_cover_the_chunks_in_order_and_shrink_to_the_shortest_run() {
+        // Expectation: the runs start at chunk 0 and end at the last chunk, in order; each
+        // takes 1 / (threads + 1) of the chunks left, rounded up, but no fewer than the
+        // shortest run, and the last takes what is left where less than the shortest run
+        // would follow it; so none is shorter than the shortest run, and none is longer than
+        // the one before it but the last (the rest it takes is less than two shortest runs).
+        for (chunks, threads, min_run) in [(391, 2, 8), (392, 2, 4), (3907, 16, 8), (40, 3, 1)] {
+            let starts = guided_starts(chunks, threads, min_run);
+            assert_eq!((starts[0], *starts.last().unwrap()), (0, chunks));
+            let runs: Vec<usize> = starts.windows(2).map(|w| w[1] - w[0]).collect();
+            assert!(runs.iter().all(|&run| run >= min_run), "{runs:?}");
+            assert_eq!(runs[0], chunks.div_ceil(threads + 1).max(min_run));
+            let last = runs.len() - 1;
+            for r in 1..last {
+                assert!(runs[r] <= runs[r - 1], "{runs:?}");
+            }
+            assert!(
+                runs[last] < 2 * min_run || runs[last] <= runs[last - 1],
+                "{runs:?}"
+            );
+            assert!(runs.len() > threads, "{runs:?}");
+        }
+    }
+
+    #[test]
+    fn the_plan_takes_guided_runs_where_few_chunks_wait_and_else_one_run_a_thread() {
+        // Expectation: chunks whose pairs reach one chunk back wait only at a run's start, one
+        // a run: few enough for runs that shrink, more runs than threads. Chunks whose pairs
+        // all reach back to grain 0 wait wherever a run starts after chunk 0: every chunk but
+        // the first run's, too many, and the plan is one run a thread. One thread: one run.
+        let chunks = 400;
+        let one_back: Vec<u32> = (0..chunks)
+            .map(|c: usize| (c.saturating_sub(1) * GRAIN_CHUNK) as u32)
+            .collect();
+        let plan = SweepPlan::new(&one_back, 2);
+        assert!(plan.runs() > 2 && plan.fused, "{plan:?}");
+        assert_eq!(plan.waiting, plan.runs() - 1);
+        assert_eq!(plan.starts, guided_starts(chunks, 2, GUIDED_MIN_RUN));
+        let all_back = vec![0u32; chunks];
+        let plan = SweepPlan::new(&all_back, 2);
+        assert_eq!(plan, SweepPlan::even(&all_back, 2));
+        assert_eq!(plan.runs(), 2);
+        assert_eq!(SweepPlan::new(&one_back, 1).runs(), 1);
+    }
+
+    #[test]
     fn each_chunks_earliest_first_grain_is_the_least_first_grain_of_its_pairs() {
         // Expectation: the least i over the list's pairs [i, j] with j in the chunk (the
         // chunk's first grain where there is none), found by a scan of every pair.
@@ -933,5 +1082,53 @@ mod tests {
         }
         // Both ways of sweeping were taken.
         assert!(fused_with_waiting && two_passes);
+    }
+
+    #[test]
+    fn guided_runs_give_the_same_bits_as_one_thread() {
+        // Expectation: as above, with runs that shrink towards the sweep's end, down to one
+        // chunk, more runs than threads, each taken by whichever thread comes free: a chunk's
+        // operations do not depend on the task that takes it. The packing's eleven chunks are
+        // too few for `SweepPlan::new` to choose such runs, so each step is given them.
+        for level in [ModelLevel::Full, ModelLevel::Rigid] {
+            let stepped = |threads: usize| {
+                in_pool(threads, || {
+                    let mut world = packing(level, false);
+                    let mut guided_steps = 0;
+                    for _ in 0..40 {
+                        if threads > 1 && !world.earliest_first_grains.is_empty() {
+                            let plan =
+                                SweepPlan::guided(&world.earliest_first_grains, threads, 1, 1);
+                            assert!(plan.runs() > threads && plan.fused, "{plan:?}");
+                            assert!(plan.waiting > 0, "{plan:?}");
+                            world.sweep_plan = plan;
+                        }
+                        let builds = world.neighbors.builds;
+                        world.step().unwrap();
+                        guided_steps += usize::from(world.neighbors.builds == builds);
+                    }
+                    let frames: Vec<Vec<u64>> = world
+                        .frames
+                        .iter()
+                        .map(super::super::tests::frame_bits)
+                        .collect();
+                    (
+                        format!("{:?}", world.grains),
+                        frames,
+                        format!("{:?}", world.totals),
+                        guided_steps,
+                    )
+                })
+            };
+            let one = stepped(1);
+            for threads in [2, 3] {
+                let many = stepped(threads);
+                let at = format!("{level:?}, {threads} threads");
+                assert!(many.3 >= 20, "{at}: {} steps on guided runs", many.3);
+                assert!(one.0 == many.0, "{at}: grains differ");
+                assert!(one.1 == many.1, "{at}: frames differ");
+                assert_eq!(one.2, many.2, "{at}: totals differ");
+            }
+        }
     }
 }

@@ -604,6 +604,7 @@ pub(crate) fn write_summary(
             t.mean_waiting_chunks(),
             t.chunks
         )?;
+        writeln!(f, "sweep_runs = {}", t.runs)?;
         writeln!(f, "sweep_threads_busy = {:.3}", t.busy_share())?;
     }
     if s.mcap_seconds > 0.0 {
