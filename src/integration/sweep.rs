@@ -572,7 +572,22 @@ impl SweepPlan {
     pub(super) fn new(earliest_first_grains: &[u32], threads: usize) -> Self {
         let even = Self::even(earliest_first_grains, threads);
         let chunks = earliest_first_grains.len();
-        if threads <= 1 || chunks < 4 * (threads + 1) * GUIDED_MIN_RUN {
+        if threads <= 1 {
+            return even;
+        }
+        if !even.fused {
+            // Every grain waits for the second round: the runs are the pair pass's alone, and
+            // shrinking ones, down to one chunk, make no chunk wait longer (issue #16: on
+            // LAMMPS's packing in its
+            // file's order, two threads on the Intel machine, one run a thread kept them busy
+            // 85% of the sweep).
+            let starts = guided_starts(chunks, threads, 1);
+            let mut plan = Self::with_starts(earliest_first_grains, threads, starts, MOST_WAITING);
+            plan.fused = false;
+            plan.waiting_chunks.clear();
+            return plan;
+        }
+        if chunks < 4 * (threads + 1) * GUIDED_MIN_RUN {
             return even;
         }
         // Runs that shrink towards the sweep's end, which the threads take as they come free,
@@ -924,7 +939,7 @@ mod tests {
             let mut world = packing(ModelLevel::Rigid, false);
             world.step().unwrap();
             let efg = &world.earliest_first_grains;
-            let plan = SweepPlan::new(efg, threads);
+            let plan = SweepPlan::even(efg, threads);
             let chunks = efg.len();
             assert_eq!(plan.runs(), threads);
             assert_eq!((plan.starts[0], plan.starts[threads]), (0, chunks));
@@ -975,22 +990,39 @@ mod tests {
 
     #[test]
     fn the_plan_takes_guided_runs_where_few_chunks_wait_and_else_one_run_a_thread() {
-        // Expectation: chunks whose pairs reach one chunk back wait only at a run's start, one
-        // a run: few enough for runs that shrink, more runs than threads. Chunks whose pairs
-        // all reach back to grain 0 wait wherever a run starts after chunk 0: every chunk but
-        // the first run's, too many, and the plan is one run a thread. One thread: one run.
+        // Expectation: chunks whose pairs reach `back` chunks back wait where a run starts, up
+        // to `back` of them a run. One chunk back: few enough for runs that shrink (more runs
+        // than threads, fused). Thirty back: few enough for one run a thread (30 of 400, one
+        // in eight at most) but too many for the shrinking runs (at most one in four), so
+        // one run a thread. Every chunk back to grain 0: too many for either, and every grain
+        // waits for the second round; its pair pass alone then takes the shrinking runs, down
+        // to one chunk (no chunk waits on them), and every chunk after the first run would
+        // wait. One thread: one run.
         let chunks = 400;
-        let one_back: Vec<u32> = (0..chunks)
-            .map(|c: usize| (c.saturating_sub(1) * GRAIN_CHUNK) as u32)
-            .collect();
+        let reaching_back = |back: usize| -> Vec<u32> {
+            (0..chunks)
+                .map(|c: usize| (c.saturating_sub(back) * GRAIN_CHUNK) as u32)
+                .collect()
+        };
+        let guided = guided_starts(chunks, 2, GUIDED_MIN_RUN);
+        let one_back = reaching_back(1);
         let plan = SweepPlan::new(&one_back, 2);
         assert!(plan.runs() > 2 && plan.fused, "{plan:?}");
         assert_eq!(plan.waiting, plan.runs() - 1);
-        assert_eq!(plan.starts, guided_starts(chunks, 2, GUIDED_MIN_RUN));
+        assert_eq!(plan.starts, guided);
+        let thirty_back = reaching_back(30);
+        let plan = SweepPlan::new(&thirty_back, 2);
+        assert_eq!(plan, SweepPlan::even(&thirty_back, 2));
+        assert!(
+            plan.runs() == 2 && plan.fused && plan.waiting == 30,
+            "{plan:?}"
+        );
         let all_back = vec![0u32; chunks];
         let plan = SweepPlan::new(&all_back, 2);
-        assert_eq!(plan, SweepPlan::even(&all_back, 2));
-        assert_eq!(plan.runs(), 2);
+        assert!(!SweepPlan::even(&all_back, 2).fused);
+        assert!(!plan.fused && plan.waiting_chunks.is_empty(), "{plan:?}");
+        assert_eq!(plan.starts, guided_starts(chunks, 2, 1));
+        assert_eq!(plan.waiting, chunks - plan.starts[1]);
         assert_eq!(SweepPlan::new(&one_back, 1).runs(), 1);
     }
 
