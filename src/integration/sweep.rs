@@ -1052,6 +1052,15 @@ mod tests {
         );
     }
 
+    /// The bits of every grain's frame, in grain order.
+    fn every_frames_bits(world: &World) -> Vec<Vec<u64>> {
+        world
+            .frames
+            .iter()
+            .map(super::super::tests::frame_bits)
+            .collect()
+    }
+
     #[test]
     fn the_sweep_gives_the_same_bits_on_any_number_of_threads() {
         // Expectation: a chunk's pairs and grains are the same operations whichever task
@@ -1082,14 +1091,9 @@ mod tests {
                         .contacts()
                         .map(|(pair, c, _)| format!("{pair:?} {c:?}"))
                         .collect();
-                    let frames: Vec<Vec<u64>> = world
-                        .frames
-                        .iter()
-                        .map(super::super::tests::frame_bits)
-                        .collect();
                     (
                         format!("{:?}", world.grains),
-                        frames,
+                        every_frames_bits(&world),
                         contacts,
                         format!("{:?}", world.totals),
                         waiting,
@@ -1139,14 +1143,9 @@ mod tests {
                         world.step().unwrap();
                         guided_steps += usize::from(world.neighbors.builds == builds);
                     }
-                    let frames: Vec<Vec<u64>> = world
-                        .frames
-                        .iter()
-                        .map(super::super::tests::frame_bits)
-                        .collect();
                     (
                         format!("{:?}", world.grains),
-                        frames,
+                        every_frames_bits(&world),
                         format!("{:?}", world.totals),
                         guided_steps,
                     )
