@@ -387,38 +387,36 @@ pub(super) fn sweep<'a>(
     // one run a thread, the threads were busy 93% of the sweep of the 10⁵ run on the Intel
     // machine, whose two cores ran at unequal speeds).
     let next_run = AtomicUsize::new(0);
-    (0..plan.threads.clamp(1, runs))
-        .into_par_iter()
-        .for_each(|_| {
-            loop {
-                let r = next_run.fetch_add(1, Ordering::Relaxed);
-                if r >= runs {
-                    break;
-                }
-                sweep_run(r);
+    (0..plan.threads.min(runs)).into_par_iter().for_each(|_| {
+        loop {
+            let r = next_run.fetch_add(1, Ordering::Relaxed);
+            if r >= runs {
+                break;
             }
-            // Help with the waiting grains while another task still runs (it waits on nothing,
-            // so this ends); a run taken but not yet started is left to the task that took it,
-            // which then ends the last of its waits itself.
-            let mut spins = 0u32;
-            loop {
-                if take_waiting() {
-                    continue;
-                }
-                let running = states.iter().any(|state| {
-                    state.started.load(Ordering::Acquire) && !state.ended.load(Ordering::Acquire)
-                });
-                if !running || any_failed.load(Ordering::Acquire) {
-                    break;
-                }
-                spins += 1;
-                if spins.is_multiple_of(64) {
-                    std::thread::yield_now();
-                } else {
-                    std::hint::spin_loop();
-                }
+            sweep_run(r);
+        }
+        // Help with the waiting grains while another task still runs (it waits on nothing,
+        // so this ends); a run taken but not yet started is left to the task that took it,
+        // which then ends the last of its waits itself.
+        let mut spins = 0u32;
+        loop {
+            if take_waiting() {
+                continue;
             }
-        });
+            let running = states.iter().any(|state| {
+                state.started.load(Ordering::Acquire) && !state.ended.load(Ordering::Acquire)
+            });
+            if !running || any_failed.load(Ordering::Acquire) {
+                break;
+            }
+            spins += 1;
+            if spins.is_multiple_of(64) {
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+    });
     let failed = results.iter().any(|result| result.pairs.failure.is_some());
     if !failed && results.iter().any(|result| result.grains.is_none()) {
         // The passes one after the other: every pair is done, and no pair pass reads a frame
@@ -578,14 +576,10 @@ impl SweepPlan {
         if !even.fused {
             // Every grain waits for the second round: the runs are the pair pass's alone, and
             // shrinking ones, down to one chunk, make no chunk wait longer (issue #16: on
-            // LAMMPS's packing in its
-            // file's order, two threads on the Intel machine, one run a thread kept them busy
-            // 85% of the sweep).
+            // LAMMPS's packing in its file's order, two threads on the Intel machine, one run
+            // a thread kept them busy 85% of the sweep).
             let starts = guided_starts(chunks, threads, 1);
-            let mut plan = Self::with_starts(earliest_first_grains, threads, starts, MOST_WAITING);
-            plan.fused = false;
-            plan.waiting_chunks.clear();
-            return plan;
+            return Self::with_starts(earliest_first_grains, threads, starts, None);
         }
         if chunks < 4 * (threads + 1) * GUIDED_MIN_RUN {
             return even;
@@ -615,7 +609,7 @@ impl SweepPlan {
         most_waiting: usize,
     ) -> Self {
         let starts = guided_starts(earliest_first_grains.len(), threads, min_run);
-        Self::with_starts(earliest_first_grains, threads, starts, most_waiting)
+        Self::with_starts(earliest_first_grains, threads, starts, Some(most_waiting))
     }
 
     /// One run a thread, each the same work but for its waiting chunks.
@@ -648,16 +642,16 @@ impl SweepPlan {
             end += own_work + 0.5 * w as f64;
         }
         starts.push(chunks);
-        Self::with_starts(earliest_first_grains, threads, starts, MOST_WAITING)
+        Self::with_starts(earliest_first_grains, threads, starts, Some(MOST_WAITING))
     }
 
     /// The plan whose runs start at `starts` (and end at the chunks' end, `starts`' last),
-    /// fused unless more than one chunk in `most_waiting` waits.
+    /// fused unless more than one chunk in `most_waiting` waits; never fused without it.
     fn with_starts(
         earliest_first_grains: &[u32],
         threads: usize,
         starts: Vec<usize>,
-        most_waiting: usize,
+        most_waiting: Option<usize>,
     ) -> Self {
         let chunks = earliest_first_grains.len();
         let mut plan = Self {
@@ -676,7 +670,7 @@ impl SweepPlan {
         // run's thread still computes its grains, and the others idle (on LAMMPS's packing,
         // in the order LAMMPS wrote it out, half the chunks waited and two threads stepped
         // 0.86 times as fast as with the two passes).
-        plan.fused = plan.waiting * most_waiting <= chunks;
+        plan.fused = most_waiting.is_some_and(|most| plan.waiting * most <= chunks);
         if plan.fused {
             plan.waiting_chunks = waiting_chunks;
         }
@@ -1118,6 +1112,17 @@ mod tests {
         }
         // Both ways of sweeping were taken.
         assert!(fused_with_waiting && two_passes);
+    }
+
+    #[test]
+    fn a_world_without_grains_steps_on_two_threads() {
+        // Expectation: no chunk, no run, no task: the step does nothing and does not fail.
+        in_pool(2, || {
+            let packed = packing(ModelLevel::Rigid, false);
+            let mut world = World::new(packed.params.clone(), Vec::new(), packed.walls.clone());
+            world.step().unwrap();
+            assert_eq!(world.sweep_tally.runs, 0);
+        });
     }
 
     #[test]
