@@ -1119,7 +1119,7 @@ mod tests {
         // Expectation: no chunk, no run, no task: the step does nothing and does not fail.
         in_pool(2, || {
             let packed = packing(ModelLevel::Rigid, false);
-            let mut world = World::new(packed.params.clone(), Vec::new(), packed.walls.clone());
+            let mut world = World::new(packed.params, Vec::new(), packed.walls.clone());
             world.step().unwrap();
             assert_eq!(world.sweep_tally.runs, 0);
         });
