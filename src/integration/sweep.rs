@@ -715,7 +715,8 @@ const MOST_WAITING_GUIDED: usize = 4;
 
 /// The shortest of the runs that shrink towards the sweep's end, in chunks: fewer runs, fewer
 /// fronts to wait on (issue #16: on the Intel machine, two threads, runs down to 4, 8 or 16
-/// chunks kept the threads busy 97–99% of the sweep against 95–97% with one run a thread; the
+/// chunks kept the threads busy 97–99% of the sweep against 95–97% with one run a thread (the
+/// medians of 5 or 6 runs each, on the bench's full lattice and on the 10⁵ run's gas); the
 /// threads' time on the chunks moved by up to 8% from one sitting to the next, more than it
 /// differed between them).
 const GUIDED_MIN_RUN: usize = 8;
