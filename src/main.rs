@@ -556,7 +556,7 @@ fn run(cli: Cli) -> Result<()> {
                 (result, _) => result?,
             };
             println!(
-                "{}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  candidate pairs per grain: {:.2}  neighbour-list builds: {}  seconds: {:.3}",
+                "{}  grains: {}  steps: {}  threads: {}  phi: {:.3}  contacts per grain: {:.2}  candidate pairs per grain: {:.2}  neighbour-list builds: {} (skin {:.2} times its own)  seconds: {:.3}",
                 scene,
                 result.grains,
                 result.steps,
@@ -565,6 +565,7 @@ fn run(cli: Cli) -> Result<()> {
                 2.0 * result.contacts as f64 / result.grains as f64,
                 result.candidate_pairs as f64 / result.grains as f64,
                 result.neighbor_builds,
+                result.skin_widening,
                 result.seconds
             );
             println!("grain-steps/s: {:.4e}", result.grain_steps_per_second());

@@ -13,6 +13,40 @@ use rayon::prelude::*;
 /// Grains per parallel task of a build.
 const BUILD_CHUNK: usize = 256;
 
+/// A list that lasted fewer checks than this was rebuilt too often: the next is built with a
+/// wider skin ([`adapted_skin`]).
+pub const SHORT_LIST: u64 = 20;
+/// A list that lasted more checks than this holds more open pairs than it needs: the next is
+/// built with a narrower skin, down to the one the list was made with.
+pub const LONG_LIST: u64 = 80;
+/// The factors of one widening and one narrowing, and the widest skin as a multiple of the
+/// list's own.
+const WIDEN: f64 = 1.25;
+const NARROW: f64 = 0.9;
+const WIDEST: f64 = 4.0;
+
+/// The skin of the next build, from the current `skin`, the list's own `base` and the checks
+/// the last list `lasted` (issue #16). A thicker skin lists more open pairs, each a pair pass
+/// turn, and is rebuilt less often: a dense packing that is still moving (the bench's lattice
+/// after its release, 2.99 candidate pairs a grain at 0.2 to 0.4 mean radii) rebuilt its list
+/// every 7 to 14 steps at 0.2, and ran 1.05 times as fast at 0.3 and 0.4 with the same pairs,
+/// while the 10⁵ run's gas, whose list lasts a hundred steps, ran 0.95 times as fast at 0.3
+/// (2.45 candidate pairs a grain against 2.33). So the skin widens while lists last fewer than
+/// [`SHORT_LIST`] checks, up to four times the list's own and to `room`, and narrows back
+/// while they last more than [`LONG_LIST`]. The list holds every pair within its skin
+/// whichever it is, and the step's sums take the contacts alone, in an order that does not
+/// depend on the list: the results are the same bits with any skin, only the speed differs.
+pub fn adapted_skin(skin: f64, base: f64, lasted: u64, room: f64) -> f64 {
+    if lasted < SHORT_LIST {
+        // Where the room is below the current skin (a cell that shrank), the skin stays.
+        (skin * WIDEN).min(WIDEST * base).min(room.max(skin))
+    } else if lasted > LONG_LIST {
+        (skin * NARROW).max(base)
+    } else {
+        skin
+    }
+}
+
 /// The working arrays of a build, kept from one build to the next: made afresh each build, they
 /// were pages the kernel zeroed and vectors copied as they grew, some 2% of a rigid step on
 /// LAMMPS's 10⁵ packing, which rebuilds its list every 33 steps (issue #16). They hold nothing
@@ -41,8 +75,14 @@ impl std::fmt::Debug for BuildScratch {
 
 #[derive(Debug, Clone, Default)]
 pub struct NeighborList {
-    /// Extra distance added to the bounding circles, in length units.
+    /// Extra distance added to the bounding circles, in length units: the skin of the next
+    /// build, which [`adapt_skin`](Self::adapt_skin) widens and narrows from `base_skin`.
     pub skin: f64,
+    /// The skin the list was made with (a scenario's `contact.skin` times the mean radius):
+    /// the adapted skin never falls below it.
+    base_skin: f64,
+    /// Checks that kept the list since its last build (see [`kept`](Self::kept)).
+    checks_kept: u64,
     /// Candidate pairs (i, j), i < j, sorted.
     pub pairs: Vec<[u32; 2]>,
     /// The pairs `[g, j]` of grain g are `pairs[first_offsets[g]..first_offsets[g + 1]]`: one
@@ -74,9 +114,40 @@ impl NeighborList {
     pub fn new(skin: f64) -> Self {
         Self {
             skin,
+            base_skin: skin,
             affine_scale: DVec2::ONE,
             ..Default::default()
         }
+    }
+
+    /// The skin the list was made with.
+    pub fn base_skin(&self) -> f64 {
+        self.base_skin
+    }
+
+    /// Whether the list was built for `grains` grains and not invalidated since: a rebuild it
+    /// then needs is one that the grains' motion asked for.
+    pub fn is_built_for(&self, grains: usize) -> bool {
+        grains > 0 && self.reference_centers.len() == grains
+    }
+
+    /// Counts a check that kept the list (one a step, or a multi-rate cycle).
+    pub fn kept(&mut self) {
+        self.checks_kept += 1;
+    }
+
+    /// Before a build that the grains' motion asked for: the skin of the new list from how
+    /// many checks the old one lasted ([`adapted_skin`]), at most `room` (the widest skin the
+    /// boundary allows; unbounded in a box).
+    pub fn adapt_skin(&mut self, room: f64) {
+        self.skin = adapted_skin(self.skin, self.base_skin, self.checks_kept, room);
+    }
+
+    /// Back to the skin the list was made with (a periodic cell too narrow for the widened
+    /// skin); the next check rebuilds the list.
+    pub fn reset_skin(&mut self) {
+        self.skin = self.base_skin;
+        self.invalidate();
     }
 
     /// Forgets the last build: the next check asks for a new one (after a cell remap, whose
@@ -354,6 +425,7 @@ impl NeighborList {
     fn start_build(&mut self, centers: &[DVec2], reach: &[f64]) -> bool {
         let n = centers.len();
         self.builds += 1;
+        self.checks_kept = 0;
         // Copied in parallel (an indexed iterator's `par_extend` writes in place): serial, the
         // copies were a serial part of every build.
         self.reference_centers.clear();
@@ -745,6 +817,44 @@ fn concatenate_in_parallel<T: Copy + Send + Sync>(to: &mut Vec<T>, chunks: &[Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_skin_widens_after_short_lists_and_narrows_back_after_long_ones() {
+        // Expectation (adapted_skin's rule): a list that lasted fewer than SHORT_LIST checks
+        // gives a skin 1.25 times as wide, up to four times the list's own and to the room;
+        // one that lasted more than LONG_LIST a skin 0.9 times as wide, down to the list's
+        // own; any other keeps its skin.
+        let base = 0.01;
+        assert_eq!(
+            adapted_skin(base, base, SHORT_LIST - 1, f64::INFINITY),
+            1.25 * base
+        );
+        assert_eq!(adapted_skin(base, base, SHORT_LIST, f64::INFINITY), base);
+        assert_eq!(adapted_skin(base, base, LONG_LIST, f64::INFINITY), base);
+        assert_eq!(
+            adapted_skin(0.03, base, LONG_LIST + 1, f64::INFINITY),
+            0.9 * 0.03
+        );
+        assert_eq!(
+            adapted_skin(0.0105, base, LONG_LIST + 1, f64::INFINITY),
+            base
+        );
+        assert_eq!(adapted_skin(0.038, base, 0, f64::INFINITY), 4.0 * base);
+        assert_eq!(adapted_skin(base, base, 0, 0.011), 0.011);
+        // A room below the skin (a cell that shrank) neither widens nor narrows it.
+        assert_eq!(adapted_skin(0.02, base, 0, 0.015), 0.02);
+        // Widened from the list's own, it stops at four times it.
+        let mut skin = base;
+        for _ in 0..20 {
+            skin = adapted_skin(skin, base, 3, f64::INFINITY);
+        }
+        assert_eq!(skin, 4.0 * base);
+        // Narrowed back, it stops at the list's own.
+        for _ in 0..40 {
+            skin = adapted_skin(skin, base, 500, f64::INFINITY);
+        }
+        assert_eq!(skin, base);
+    }
 
     /// Runs `work` on a pool of `threads` threads.
     fn on_threads(threads: usize, work: impl FnOnce() + Send) {

@@ -943,11 +943,20 @@ impl World {
         self.phase_times.frames += (frames_done - start).as_secs_f64();
         let (centers, reach) = (&self.centers, &self.reach);
         let cell = self.cell();
+        // The widest skin the boundary allows a new list (see `adapt_skin`).
+        let mut room = f64::INFINITY;
         let rebuild = match &cell {
             Some(cell) => {
                 // Checked every step: between rebuilds the cell keeps shrinking.
                 let max_reach = crate::geometry::broadphase::largest_reach(reach);
-                let range = 2.0 * max_reach + self.neighbors.skin;
+                let mut range = 2.0 * max_reach + self.neighbors.skin;
+                if cell.check_range(range).is_err()
+                    && self.neighbors.skin > self.neighbors.base_skin()
+                {
+                    // A skin widened when the cell was wider: back to the list's own.
+                    self.neighbors.reset_skin();
+                    range = 2.0 * max_reach + self.neighbors.skin;
+                }
                 if cell.check_range(range).is_err() {
                     return Err(Instability::CellTooNarrow {
                         step: self.step,
@@ -955,6 +964,10 @@ impl World {
                         range,
                     });
                 }
+                // A widened range at most half what the cell takes, so that it may shrink a
+                // while before the skin must narrow again.
+                let width = cell.widths()[0].min(cell.widths()[1]);
+                room = 0.25 * width - 2.0 * max_reach;
                 self.neighbors
                     .needs_rebuild_periodic(centers, reach, cell, max_reach)
             }
@@ -962,6 +975,11 @@ impl World {
                 .neighbors
                 .needs_rebuild_with_reserve(centers, reach, reserve),
         };
+        if !rebuild {
+            self.neighbors.kept();
+        } else if self.neighbors.is_built_for(n) {
+            self.neighbors.adapt_skin(room);
+        }
         if rebuild {
             let old_pairs = std::mem::replace(
                 &mut self.neighbors.pairs,
@@ -1666,6 +1684,61 @@ mod tests {
             still.step().unwrap();
         }
         assert_ne!(state(&still), state(&carried));
+    }
+
+    #[test]
+    fn the_results_are_the_same_bits_whatever_the_skin() {
+        // Expectation: the list holds every pair within its skin whichever skin it has, and
+        // the step sums contacts alone in an order the list does not set, so the skin changes
+        // the speed only. The bench's packing, released from its overlaps, rebuilds its list
+        // every few steps at its own skin: the skin widens (adapted_skin), while a copy given a
+        // skin eight times as thick, which lists next-nearest neighbours too, keeps its lists long and its skin. Both, squeezed with the
+        // affine carry, then in a periodic cell that shrinks and shears, step to the same bits
+        // with different lists.
+        let grain_bits = |w: &World| -> Vec<u64> {
+            w.grains
+                .iter()
+                .flat_map(Grain::to_array)
+                .map(f64::to_bits)
+                .collect()
+        };
+        let mut squeezed = squeezed_packing(400);
+        squeezed.affine_carry = true;
+        let periodic = {
+            let base = crate::run::bench::dense_packing(400, 1.0);
+            let grains = base.grains.clone();
+            World::new(base.params, grains, base.walls.clone())
+                .with_periodic(PeriodicBoundary::default())
+        };
+        for (case, world) in [("squeezed box", squeezed), ("periodic cell", periodic)] {
+            let own = world.neighbors.skin;
+            let mut thick = world.clone();
+            thick.neighbors = NeighborList::new(8.0 * own);
+            let mut adapted = world;
+            for _ in 0..80 {
+                for w in [&mut adapted, &mut thick] {
+                    if let Some(cell) = w.periodic.as_mut() {
+                        cell.shear_rate = 1e-3;
+                        let (width, _) = crate::boundary::walls::box_size(&w.walls);
+                        w.walls[crate::boundary::walls::RIGHT].velocity.x = -1e-3 * width;
+                    }
+                    w.step().unwrap();
+                }
+            }
+            assert!(
+                adapted.neighbors.skin > 1.5 * own,
+                "{case}: skin {} from {own}",
+                adapted.neighbors.skin
+            );
+            assert_eq!(thick.neighbors.skin, 8.0 * own, "{case}");
+            assert_ne!(adapted.neighbors.builds, thick.neighbors.builds, "{case}");
+            assert_ne!(
+                adapted.neighbors.pairs.len(),
+                thick.neighbors.pairs.len(),
+                "{case}: the lists should differ"
+            );
+            assert_eq!(grain_bits(&adapted), grain_bits(&thick), "{case}");
+        }
     }
 
     #[test]

@@ -30,6 +30,9 @@ pub struct BenchResult {
     pub phi: f64,
     /// Neighbour-list builds during the timed steps.
     pub neighbor_builds: u64,
+    /// The list's skin after the timed steps, as a multiple of the skin it was made with
+    /// (see [`crate::geometry::broadphase::adapted_skin`]).
+    pub skin_widening: f64,
     /// Seconds of the timed steps spent in each pass of the step.
     pub phases: PhaseTimes,
     /// The timed steps' sweeps: how their tasks shared the chunks.
@@ -130,6 +133,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         candidate_pairs: world.neighbors.pairs.len(),
         phi: world.totals.grain_area / (width * height),
         neighbor_builds: world.neighbors.builds - builds_before,
+        skin_widening: world.neighbors.skin / world.neighbors.base_skin(),
         phases: PhaseTimes {
             frames: world.phase_times.frames - phases_before.frames,
             neighbors: world.phase_times.neighbors - phases_before.neighbors,
