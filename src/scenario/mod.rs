@@ -596,7 +596,10 @@ pub struct ContactSettings {
     pub on_domain_exit: DomainExitPolicy,
     /// Domain floor: the law is left when `a L_c + (b-1) delta_n <= floor a L_c`.
     pub domain_floor: f64,
-    /// Verlet skin as a fraction of the mean radius.
+    /// Verlet skin as a fraction of the mean radius: the neighbour list's skin at the start,
+    /// which the list widens while it is rebuilt often and narrows back towards this value
+    /// while it lasts (`crate::geometry::broadphase::adapted_skin`). The results are the same
+    /// bits with any skin; only the speed depends on it.
     pub skin: f64,
     /// Coulomb friction (SPEC §13): frictionless unless set.
     #[serde(skip_serializing_if = "FrictionSettings::is_default")]
