@@ -1686,22 +1686,24 @@ mod tests {
         assert_ne!(state(&still), state(&carried));
     }
 
+    /// Every grain's state, word by word.
+    fn grain_bits(w: &World) -> Vec<u64> {
+        w.grains
+            .iter()
+            .flat_map(Grain::to_array)
+            .map(f64::to_bits)
+            .collect()
+    }
+
     #[test]
     fn the_results_are_the_same_bits_whatever_the_skin() {
         // Expectation: the list holds every pair within its skin whichever skin it has, and
         // the step sums contacts alone in an order the list does not set, so the skin changes
         // the speed only. The bench's packing, released from its overlaps, rebuilds its list
         // every few steps at its own skin: the skin widens (adapted_skin), while a copy given a
-        // skin eight times as thick, which lists next-nearest neighbours too, keeps its lists long and its skin. Both, squeezed with the
-        // affine carry, then in a periodic cell that shrinks and shears, step to the same bits
-        // with different lists.
-        let grain_bits = |w: &World| -> Vec<u64> {
-            w.grains
-                .iter()
-                .flat_map(Grain::to_array)
-                .map(f64::to_bits)
-                .collect()
-        };
+        // skin eight times as thick, which lists next-nearest neighbours too, keeps its lists
+        // long and its skin. Both, squeezed with the affine carry, then in a periodic cell that
+        // shrinks and shears, step to the same bits with different lists.
         let mut squeezed = squeezed_packing(400);
         squeezed.affine_carry = true;
         let periodic = {
@@ -1759,13 +1761,6 @@ mod tests {
             eprintln!("no AVX here: the grain pass takes no blocks, nothing to compare");
             return;
         }
-        let grain_bits = |w: &World| -> Vec<u64> {
-            w.grains
-                .iter()
-                .flat_map(Grain::to_array)
-                .map(f64::to_bits)
-                .collect()
-        };
         for case in [
             "affine box",
             "friction",
