@@ -125,6 +125,15 @@ impl NeighborList {
         self.base_skin
     }
 
+    /// The skin as a multiple of the one the list was made with (1 for a list without one).
+    pub fn skin_widening(&self) -> f64 {
+        if self.base_skin > 0.0 {
+            self.skin / self.base_skin
+        } else {
+            1.0
+        }
+    }
+
     /// Whether the list was built for `grains` grains and not invalidated since: a rebuild it
     /// then needs is one that the grains' motion asked for.
     pub fn is_built_for(&self, grains: usize) -> bool {

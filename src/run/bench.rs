@@ -133,7 +133,7 @@ pub fn run_bench(world: &mut World, warmup: u64, steps: u64) -> Result<BenchResu
         candidate_pairs: world.neighbors.pairs.len(),
         phi: world.totals.grain_area / (width * height),
         neighbor_builds: world.neighbors.builds - builds_before,
-        skin_widening: world.neighbors.skin / world.neighbors.base_skin(),
+        skin_widening: world.neighbors.skin_widening(),
         phases: PhaseTimes {
             frames: world.phase_times.frames - phases_before.frames,
             neighbors: world.phase_times.neighbors - phases_before.neighbors,

@@ -136,6 +136,8 @@ pub struct RunSummary {
     /// Largest inertial number seen once p_c > 1e-4 E.
     pub max_loaded_inertial_number: f64,
     pub neighbor_builds: u64,
+    /// SDEM only: the neighbour list's skin at the end, as a multiple of the scenario's.
+    pub neighbor_skin_widening: Option<f64>,
     /// SDEM only: the wall-clock seconds this process's steps spent in each pass of the step.
     pub phase_seconds: Option<PhaseTimes>,
     /// SDEM only: how this process's step sweeps shared their grain chunks among threads (a
@@ -584,6 +586,9 @@ pub(crate) fn write_summary(
         s.max_loaded_inertial_number
     )?;
     writeln!(f, "neighbor_builds = {}", s.neighbor_builds)?;
+    if let Some(widening) = s.neighbor_skin_widening {
+        writeln!(f, "neighbor_skin_widening = {widening:.3}")?;
+    }
     if let Some(p) = &s.phase_seconds {
         // As LAMMPS's breakdown: which pass of the step a run's time went to.
         for (name, seconds) in [

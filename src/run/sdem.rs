@@ -265,6 +265,7 @@ impl Simulation for Sdem {
     fn statistics(&self) -> SolverStatistics {
         SolverStatistics {
             neighbor_builds: self.world.neighbors.builds,
+            neighbor_skin_widening: Some(self.world.neighbors.skin_widening()),
             phase_seconds: Some(self.world.phase_times),
             sweeps: Some(self.world.sweep_tally),
             adaptive: self.adaptive,

@@ -238,6 +238,9 @@ pub struct RunRecord<'a> {
 pub struct SolverStatistics {
     /// Neighbour-list builds (0 for a solver without one).
     pub neighbor_builds: u64,
+    /// SDEM only: the neighbour list's skin at the end, as a multiple of the scenario's
+    /// (see [`crate::geometry::broadphase::adapted_skin`]).
+    pub neighbor_skin_widening: Option<f64>,
     /// SDEM only: where this process's steps spent their wall-clock time.
     pub phase_seconds: Option<PhaseTimes>,
     /// SDEM only: how this process's step sweeps shared their grain chunks among threads.

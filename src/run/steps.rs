@@ -508,6 +508,7 @@ impl<'a> Run<'a> {
             last: std::mem::take(&mut self.last_row),
             max_loaded_inertial_number: state.max_loaded_inertial_number,
             neighbor_builds: statistics.neighbor_builds,
+            neighbor_skin_widening: statistics.neighbor_skin_widening,
             phase_seconds: statistics.phase_seconds,
             sweeps: statistics.sweeps,
             mcap_seconds: self.mcap_seconds,
