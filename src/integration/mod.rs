@@ -1744,6 +1744,38 @@ mod tests {
     }
 
     #[test]
+    fn a_skin_too_wide_for_the_cell_goes_back_to_the_scenarios() {
+        // Expectation: a periodic cell too narrow for a widened skin (range 2 max reach + skin
+        // over half its width) is not an error while the scenario's skin fits: the skin goes
+        // back to the scenario's, and the steps are those of a world that never widened it.
+        let base = crate::run::bench::dense_packing(100, 1.0);
+        let world = World::new(base.params, base.grains.clone(), base.walls.clone())
+            .with_periodic(PeriodicBoundary::default());
+        let own = world.neighbors.skin;
+        let (width, height) = crate::boundary::walls::box_size(&world.walls);
+        let mut widened = world.clone();
+        widened.neighbors.skin = 0.5 * width.min(height);
+        let mut plain = world;
+        widened.step().unwrap();
+        assert_eq!(widened.neighbors.skin, own);
+        plain.step().unwrap();
+        // The list widens its skin again as its lists stay short, within what the cell takes.
+        for _ in 0..20 {
+            widened.step().unwrap();
+            plain.step().unwrap();
+        }
+        assert!(widened.neighbors.skin < 0.25 * width.min(height));
+        assert_eq!(grain_bits(&widened), grain_bits(&plain));
+        // Without the reset, the first step fails.
+        let mut fixed = widened.clone();
+        fixed.neighbors = NeighborList::new(0.5 * width.min(height));
+        assert!(matches!(
+            fixed.step(),
+            Err(Instability::CellTooNarrow { .. })
+        ));
+    }
+
+    #[test]
     fn the_grain_pass_by_blocks_changes_no_bit() {
         // Expectation: a block's lanes are its grains' one-grain updates (a unit test of
         // grain_pass compares them), its pair loads gathered in lanes are `pair_load`'s sums
