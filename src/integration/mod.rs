@@ -975,12 +975,10 @@ impl World {
                 .neighbors
                 .needs_rebuild_with_reserve(centers, reach, reserve),
         };
-        if !rebuild {
-            self.neighbors.kept();
-        } else if self.neighbors.is_built_for(n) {
-            self.neighbors.adapt_skin(room);
-        }
         if rebuild {
+            if self.neighbors.is_built_for(n) {
+                self.neighbors.adapt_skin(room);
+            }
             let old_pairs = std::mem::replace(
                 &mut self.neighbors.pairs,
                 std::mem::take(&mut self.spare_pairs),
@@ -1020,6 +1018,8 @@ impl World {
             self.earliest_first_grains = sweep::earliest_first_grains(&self.neighbors, n);
             // Made again for the new list before the sweep.
             self.sweep_plan = SweepPlan::default();
+        } else {
+            self.neighbors.kept();
         }
         self.phase_times.neighbors += frames_done.elapsed().as_secs_f64();
         Ok(())
