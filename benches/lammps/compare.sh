@@ -10,6 +10,8 @@
 # LAMMPS's two processes wrote it (the left half of the box, then the right), and sorted into
 # strips by `sdem sort-sample` ("model=rigid-lammps-packing-strips"), as LAMMPS sorts its own
 # atoms in space: on two threads the file's order costs sdem's sweep its fused passes.
+# Lines go to stdout and, with a summary (medians, ratios to LAMMPS on as many cores, two-core
+# speed-ups, and the rounds whose two-core runs look starved), to work/compare_N.txt.
 # Needs `lmp` and `mpirun` (apt-get install -y lammps openmpi-bin); builds LAMMPS's dense
 # packing of N discs once (run.sh's compression: about 6 min for 10^5 on 2 cores) in work/,
 # unless work/dense_N.data is there already: for 10^6, tile the 10^5 packing instead of
@@ -21,6 +23,8 @@ sdem=$(realpath "${5:-$here/../../target/release/sdem}")
 warmup=${WARMUP:-20}
 command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps openmpi-bin"; exit 1; }
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
+results=compare_$n.txt; : > "$results"
+say() { echo "$@" | tee -a "$results"; }
 . "$here/packing.sh"
 lammps_packing "$n"
 if [ "${SAME_PACKING:-0}" = 1 ]; then sdem_packing "$n" "$sdem"; fi
@@ -28,20 +32,22 @@ for r in $(seq 1 "$rounds"); do
   for np in 1 2; do
     pre=""; [ "$np" = 2 ] && pre="mpirun --allow-run-as-root -np 2"
     $pre lmp -log log.bench_${n}_np${np}_r$r -screen none -in in.bench -var tag "$n" -var nsteps "$lsteps" -var mode hold
-    echo "LAMMPS np=$np N=$n round=$r atom-steps/s: $(lammps_rate log.bench_${n}_np${np}_r$r "$n")"
+    say "LAMMPS np=$np N=$n round=$r atom-steps/s: $(lammps_rate log.bench_${n}_np${np}_r$r "$n")"
   done
   for model in full rigid; do
     for t in 1 2; do
       out=$("$sdem" bench --grains "$n" --steps "$ssteps" --warmup "$warmup" --threads "$t" --model "$model")
-      echo "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+      say "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
     done
   done
   if [ "${SAME_PACKING:-0}" = 1 ]; then
     for t in 1 2; do
       for order in "" _strips; do
         out=$("$sdem" bench --from sdem_$n$order/checkpoint.bin --steps "$ssteps" --warmup "$warmup" --threads "$t")
-        echo "sdem model=rigid-lammps-packing${order/_/-} threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+        say "sdem model=rigid-lammps-packing${order/_/-} threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
       done
     done
   fi
 done
+summary=$(python3 "$here/compare_summary.py" "$results")
+say "$summary"
