@@ -297,8 +297,7 @@ pub(crate) fn circle_velocity_at<T: Real>(velocity: [T; 2], omega: T, offset: [T
     ]
 }
 
-/// What the pair pass keeps of a candidate pair whether it touches or not: what it carries to
-/// the next step, and its contact length.
+/// What the pair pass carries of a candidate pair to the next step, whether it touches or not.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PairState {
     /// Where this pair's chains were: the next step's search starts there.
@@ -306,8 +305,13 @@ pub struct PairState {
     /// The tangential spring's force (SPEC §13), carried to the next step while the contact
     /// stays closed; zero while the pair is open.
     pub tangential_history: f64,
-    /// The contact's length `L_c` in the last step (zero when open): kept here, beside the
-    /// state the pass rewrites anyway, so that a [`PairContact`] fills one cache line.
+}
+
+/// What the last step measured of a contact besides its [`PairContact`] (see
+/// [`World::contacts`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactMeasures {
+    /// The contact's length `L_c`.
     pub contact_length: f64,
 }
 
@@ -607,6 +611,14 @@ pub struct World {
     circle_frames: usize,
     /// Per candidate pair (the index of [`NeighborList::pairs`]): what it carries between steps,
     pair_state: Vec<PairState>,
+    /// its contact length `L_c` in the last step (zero where it was open): a row of its own,
+    /// not a field of the state, so that a pair of rigid discs, whose state does not change,
+    /// writes 8 bytes a step instead of writing back its state's line (issue #16),
+    pair_length: Vec<f64>,
+    /// Whether some pair may hold a tangential spring though the world has no friction between
+    /// grains: after a checkpoint's history was restored into it, until its next step, which
+    /// drops them (see [`pairs::PairPass::springs_to_drop`]).
+    pair_springs_to_drop: bool,
     /// whether it touched in the last step,
     pair_active: Vec<bool>,
     /// and its contact where it did (a stale record elsewhere: read through
@@ -723,6 +735,8 @@ impl World {
             frames_current: false,
             circle_frames: 0,
             pair_state: Vec::new(),
+            pair_length: Vec::new(),
+            pair_springs_to_drop: false,
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
             pair_chunk_ends: Vec::new(),
@@ -897,6 +911,9 @@ impl World {
                 ..Default::default()
             })
             .collect();
+        self.pair_length = vec![0.0; history.pairs.len()];
+        self.pair_springs_to_drop =
+            !self.params.frictional_pairs() && history.pairs.iter().any(|(_, h)| h.to_bits() != 0);
         self.pair_active = vec![false; history.pairs.len()];
         self.pair_contacts = vec![PairContact::default(); history.pairs.len()];
         self.neighbors.invalidate();
@@ -1009,9 +1026,10 @@ impl World {
             unsafe { state.set_len(pairs.len()) };
             self.pair_state = state;
             (self.spare_pairs, self.spare_pair_state) = (old_pairs, old_state);
-            // The pair pass writes every flag, and a record wherever a flag is set, before
-            // anything reads them.
+            // The pair pass writes every flag and length, and a record wherever a flag is set,
+            // before anything reads them.
             self.pair_active.resize(pairs.len(), false);
+            self.pair_length.resize(pairs.len(), 0.0);
             self.pair_contacts
                 .resize(pairs.len(), PairContact::default());
             self.pair_chunk_ends = pair_chunk_ends(pairs, n);
@@ -1046,6 +1064,7 @@ impl World {
         // row the chunks carry unread.
         self.wraps.resize(self.grains.len(), [0, 0]);
         let every_frame_a_circle = self.frames_all_circles();
+        let springs_to_drop = self.pair_springs_to_drop;
         let no_frame_a_circle = self.frames_no_circle();
         let step = self.step;
         // Full-level and rigid grains are in a world at either level or with adaptive levels.
@@ -1068,6 +1087,7 @@ impl World {
             reach,
             wraps,
             pair_state,
+            pair_length,
             pair_active,
             pair_contacts,
             pair_chunk_ends,
@@ -1097,6 +1117,7 @@ impl World {
                 wraps,
             },
             pair_states: pair_state,
+            pair_lengths: pair_length,
             pair_active,
             pair_contacts,
             pair_chunk_ends,
@@ -1115,6 +1136,7 @@ impl World {
                 only_fast: (cycle == Some(true)).then_some(fast.as_slice()),
                 every_frame_a_circle,
                 no_frame_a_circle,
+                springs_to_drop,
             };
             let grain_pass = GrainPass {
                 params,
@@ -1179,6 +1201,8 @@ impl World {
             Some(substep) => self.step_cycle(substep)?,
             None => self.step_plain()?,
         }
+        // Every pair was recorded, and dropped any spring a frictionless world held.
+        self.pair_springs_to_drop = false;
         // The next step's time step, from the levels the grains chose (a fixed-order sum).
         let start = Instant::now();
         self.apply_adaptive_dt();
@@ -1412,15 +1436,17 @@ impl World {
     }
 
     /// The contacts of the last step between grains, in pair order: the pair `[i, j]`, its
-    /// contact, and its state (where the contact length is).
-    pub fn contacts(&self) -> impl Iterator<Item = ([u32; 2], &PairContact, &PairState)> + '_ {
+    /// contact, and what else the step measured of it (its length).
+    pub fn contacts(&self) -> impl Iterator<Item = ([u32; 2], &PairContact, ContactMeasures)> + '_ {
         self.neighbors
             .pairs
             .iter()
             .zip(&self.pair_active)
-            .zip(self.pair_contacts.iter().zip(&self.pair_state))
+            .zip(self.pair_contacts.iter().zip(&self.pair_length))
             .filter(|((_, active), _)| **active)
-            .map(|((pair, _), (contact, state))| (*pair, contact, state))
+            .map(|((pair, _), (contact, &contact_length))| {
+                (*pair, contact, ContactMeasures { contact_length })
+            })
     }
 
     /// The grains' kinetic energy and (in a periodic cell) kinetic stress after the last step.
@@ -1599,7 +1625,6 @@ mod tests {
         let old_states: Vec<PairState> = (0..old_pairs.len())
             .map(|k| PairState {
                 tangential_history: k as f64 + 1.0,
-                contact_length: 0.5 * k as f64,
                 ..Default::default()
             })
             .collect();
@@ -1644,6 +1669,43 @@ mod tests {
             world.walls[w].velocity = axis * v;
         }
         world
+    }
+
+    #[test]
+    fn springs_restored_into_a_frictionless_world_are_dropped_by_its_next_step() {
+        // Expectation: a world without friction between grains holds no pair's spring after a
+        // step, as every pair's record writes the frictionless response's zero. A checkpoint's
+        // history restored into such a world (the only way one gets there) is reported until
+        // the next step and dropped by it, on every path of the pair pass, the blocks of rigid
+        // discs (which otherwise leave the pairs' states alone) included; and the steps are
+        // the steps of the world without it, bit for bit.
+        let mut plain = crate::run::bench::dense_packing(400, 1.0);
+        crate::run::bench::with_model(&mut plain, ModelLevel::Rigid);
+        plain.step().unwrap();
+        let mut restored = plain.clone();
+        let springs: Vec<([u32; 2], f64)> = restored
+            .neighbors
+            .pairs
+            .iter()
+            .step_by(3)
+            .enumerate()
+            .map(|(k, &pair)| (pair, 1e-4 * (k % 7) as f64 + 1e-5))
+            .collect();
+        assert!(springs.len() > 100);
+        let history = ContactHistory {
+            pairs: springs.clone(),
+            ..Default::default()
+        };
+        restored.restore_contact_history(&history).unwrap();
+        assert_eq!(restored.contact_history().pairs, springs);
+        for _ in 0..3 {
+            plain.step().unwrap();
+            restored.step().unwrap();
+            assert!(restored.contact_history().pairs.is_empty());
+            assert_eq!(grain_bits(&restored), grain_bits(&plain));
+        }
+        // Every frame a circle: the pairs go by the discs' blocks.
+        assert!(restored.frames_all_circles());
     }
 
     #[test]

@@ -77,6 +77,10 @@ pub(super) struct PairPass<'a> {
     /// Whether no frame is a circle (then no pair has one): a world at the full level asks no
     /// frame whether it is one.
     pub no_frame_a_circle: bool,
+    /// Whether some pair may hold a tangential spring that a step without friction between
+    /// grains must drop: only where a checkpoint's history was restored into such a world,
+    /// until its next step (see [`record_regular_block`](Self::record_regular_block)).
+    pub springs_to_drop: bool,
 }
 
 /// Where the second grain of a pair is met: the centre of its image that meets the first, the
@@ -99,8 +103,14 @@ struct Touch {
     effective_mass: f64,
 }
 
-/// A chunk's pairs' states, flags and records, as [`PairPass::chunk`] writes them.
-type ChunkSlots<'s> = (&'s mut [PairState], &'s mut [bool], &'s mut [PairContact]);
+/// A chunk's pairs' states, contact lengths, flags and records, as [`PairPass::chunk`] writes
+/// them.
+type ChunkSlots<'s> = (
+    &'s mut [PairState],
+    &'s mut [f64],
+    &'s mut [bool],
+    &'s mut [PairContact],
+);
 
 impl<'a> PairPass<'a> {
     /// The pairs of one chunk, the first of which is pair `first_pair`; returns their sums.
@@ -108,10 +118,11 @@ impl<'a> PairPass<'a> {
         &self,
         first_pair: usize,
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
-        let slots = (states, actives, records);
+        let slots = (states, lengths, actives, records);
         #[cfg(target_arch = "x86_64")]
         if crate::lanes::Simd::discs_in_avx512() {
             // SAFETY: the processor has AVX-512 (`discs_in_avx512` holds only there).
@@ -128,13 +139,17 @@ impl<'a> PairPass<'a> {
     }
 
     #[inline(always)]
-    fn chunk_in(&self, first_pair: usize, (states, actives, records): ChunkSlots<'_>) -> PairSums {
+    fn chunk_in(
+        &self,
+        first_pair: usize,
+        (states, lengths, actives, records): ChunkSlots<'_>,
+    ) -> PairSums {
         // A world without friction between grains takes a pass that leaves the tangential
         // response out.
         if self.params.frictional_pairs() {
-            self.chunk_of::<true>(first_pair, states, actives, records)
+            self.chunk_of::<true>(first_pair, states, lengths, actives, records)
         } else {
-            self.chunk_of::<false>(first_pair, states, actives, records)
+            self.chunk_of::<false>(first_pair, states, lengths, actives, records)
         }
     }
 
@@ -144,6 +159,7 @@ impl<'a> PairPass<'a> {
         &self,
         first_pair: usize,
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
@@ -157,6 +173,7 @@ impl<'a> PairPass<'a> {
                         first_pair + k,
                         None,
                         &mut states[k],
+                        &mut lengths[k],
                         &mut actives[k],
                         &mut records[k],
                         &mut sums,
@@ -168,9 +185,13 @@ impl<'a> PairPass<'a> {
         let polygons = PolygonsAhead::new(self.contours, self.every_frame_a_circle);
         // A world of circles (the rigid level's) takes a loop without the polygon blocks' test.
         if polygons.table.is_some() {
-            self.chunk_in_order::<FRICTIONAL, true>(first_pair, polygons, states, actives, records)
+            self.chunk_in_order::<FRICTIONAL, true>(
+                first_pair, polygons, states, lengths, actives, records,
+            )
         } else {
-            self.chunk_in_order::<FRICTIONAL, false>(first_pair, polygons, states, actives, records)
+            self.chunk_in_order::<FRICTIONAL, false>(
+                first_pair, polygons, states, lengths, actives, records,
+            )
         }
     }
 
@@ -182,6 +203,7 @@ impl<'a> PairPass<'a> {
         first_pair: usize,
         mut polygons: PolygonsAhead<'a>,
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
     ) -> PairSums {
@@ -196,7 +218,7 @@ impl<'a> PairPass<'a> {
             if POLYGONS && let Some(lane) = polygons.computed(k) {
                 // The second block of two computed at once (eight lanes): as the first below.
                 if !FRICTIONAL && self.periodic.is_none() && polygons.holds_block_from(lane, k) {
-                    polygons.record_block(lane, k, states, actives, records);
+                    polygons.record_block(lane, k, states, lengths, actives, records);
                     k += BLOCK;
                     continue;
                 }
@@ -205,6 +227,7 @@ impl<'a> PairPass<'a> {
                     &polygons,
                     lane,
                     &mut states[k],
+                    &mut lengths[k],
                     &mut actives[k],
                     &mut records[k],
                     &mut sums,
@@ -237,6 +260,7 @@ impl<'a> PairPass<'a> {
                     input,
                     out,
                     &mut states[block.clone()],
+                    &mut lengths[block.clone()],
                     &mut actives[block.clone()],
                     &mut records[block],
                     &mut sums,
@@ -259,16 +283,22 @@ impl<'a> PairPass<'a> {
                     && lane == Some(0)
                     && polygons.holds_block_from(0, k)
                 {
-                    polygons.record_block(0, k, states, actives, records);
+                    polygons.record_block(0, k, states, lengths, actives, records);
                     k += BLOCK;
                     continue;
                 }
-                let (state, active, record) = (&mut states[k], &mut actives[k], &mut records[k]);
+                let (state, length, active, record) = (
+                    &mut states[k],
+                    &mut lengths[k],
+                    &mut actives[k],
+                    &mut records[k],
+                );
                 match lane {
                     Some(lane) => self.polygon_lane::<FRICTIONAL>(
-                        p, &polygons, lane, state, active, record, &mut sums,
+                        p, &polygons, lane, state, length, active, record, &mut sums,
                     ),
-                    None => self.one_pair::<FRICTIONAL>(p, None, state, active, record, &mut sums),
+                    None => self
+                        .one_pair::<FRICTIONAL>(p, None, state, length, active, record, &mut sums),
                 }
                 k += 1;
             }
@@ -355,6 +385,7 @@ impl<'a> PairPass<'a> {
         p: usize,
         computed: LaneContact,
         state: &mut PairState,
+        length: &mut f64,
         active: &mut bool,
         record: &mut PairContact,
         sums: &mut PairSums,
@@ -424,7 +455,7 @@ impl<'a> PairPass<'a> {
                 }
             },
         };
-        self.record::<FRICTIONAL>(touch, hint, end.branch, state, active, record, sums);
+        self.record::<FRICTIONAL>(touch, hint, end.branch, state, length, active, record, sums);
     }
 
     /// [`one_pair`](Self::one_pair) for the few pairs of a polygon block that leave its
@@ -436,11 +467,12 @@ impl<'a> PairPass<'a> {
         p: usize,
         computed: LaneContact,
         state: &mut PairState,
+        length: &mut f64,
         active: &mut bool,
         record: &mut PairContact,
         sums: &mut PairSums,
     ) {
-        self.one_pair::<FRICTIONAL>(p, computed, state, active, record, sums);
+        self.one_pair::<FRICTIONAL>(p, computed, state, length, active, record, sums);
     }
 
     /// Pair `p`, lane `lane` of the last polygon block: its contact and normal force as the
@@ -455,20 +487,23 @@ impl<'a> PairPass<'a> {
         polygons: &PolygonsAhead<'a>,
         lane: usize,
         state: &mut PairState,
+        length: &mut f64,
         active: &mut bool,
         record: &mut PairContact,
         sums: &mut PairSums,
     ) {
         let (block, lane) = (lane / BLOCK, lane % BLOCK);
         let Some((geometry, hint)) = polygons.results[block].lane(lane) else {
-            self.one_pair_left_by_block::<FRICTIONAL>(p, None, state, active, record, sums);
+            self.one_pair_left_by_block::<FRICTIONAL>(p, None, state, length, active, record, sums);
             return;
         };
         let forces = &polygons.forces[block];
         let at = |v: &BlockLanes| v.0[lane];
         if !SecantLaw::in_domain(at(&forces.denominator), at(&forces.floor)) {
             let computed = Some((geometry, hint));
-            self.one_pair_left_by_block::<FRICTIONAL>(p, computed, state, active, record, sums);
+            self.one_pair_left_by_block::<FRICTIONAL>(
+                p, computed, state, length, active, record, sums,
+            );
             return;
         }
         let pair = |v: &[BlockLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
@@ -481,7 +516,16 @@ impl<'a> PairPass<'a> {
             effective_mass: at(&forces.effective_mass),
         };
         let branch = pair(&polygons.input[block].branch);
-        self.record::<FRICTIONAL>(Some(touch), hint, branch, state, active, record, sums);
+        self.record::<FRICTIONAL>(
+            Some(touch),
+            hint,
+            branch,
+            state,
+            length,
+            active,
+            record,
+            sums,
+        );
     }
 
     /// Writes what the pair's step left: for a contact its record, its state (the tangential
@@ -495,6 +539,7 @@ impl<'a> PairPass<'a> {
         hint: PairHint,
         branch: DVec2,
         state: &mut PairState,
+        length: &mut f64,
         active: &mut bool,
         record: &mut PairContact,
         sums: &mut PairSums,
@@ -505,6 +550,7 @@ impl<'a> PairPass<'a> {
                 hint,
                 ..Default::default()
             };
+            *length = 0.0;
             return;
         };
         let c = &touch.geometry;
@@ -538,8 +584,8 @@ impl<'a> PairPass<'a> {
         *state = PairState {
             hint,
             tangential_history: tangential.history,
-            contact_length: c.length,
         };
+        *length = c.length;
         if self.periodic.is_some() {
             let share = symmetric_dyad(record.force_on_first_in::<FRICTIONAL>(), branch);
             for (sum, x) in sums.moment.iter_mut().zip(share) {
@@ -560,6 +606,7 @@ impl<'a> PairPass<'a> {
         input: &mut DiscPairs<PairLanes>,
         out: &mut DiscPairForces<PairLanes>,
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
         sums: &mut PairSums,
@@ -586,31 +633,44 @@ impl<'a> PairPass<'a> {
                 .contacts_if_regular(radius)
                 .or_else(|| out.contacts_with_exact_deep_caps(radius))
         {
-            self.record_regular_block(out, &contact, &branches, states, actives, records, sums);
+            self.record_regular_block(
+                out, &contact, &branches, states, lengths, actives, records, sums,
+            );
             return;
         }
         for lane in 0..LANES {
             let p = first + lane;
             let branch = DVec2::new(branches[0].0[lane], branches[1].0[lane]);
-            let (state, active, record) =
-                (&mut states[lane], &mut actives[lane], &mut records[lane]);
+            let (state, length, active, record) = (
+                &mut states[lane],
+                &mut lengths[lane],
+                &mut actives[lane],
+                &mut records[lane],
+            );
             let radius = [input.first.radius.0[lane], input.second.radius.0[lane]];
             let touch = match out.lane(lane, &radius) {
                 LaneCase::Irregular => {
-                    self.one_pair::<FRICTIONAL>(p, None, state, active, record, sums);
+                    self.one_pair::<FRICTIONAL>(p, None, state, length, active, record, sums);
                     continue;
                 }
                 LaneCase::Separate => None,
                 LaneCase::Contact(touch) => Some(touch),
             };
-            self.record::<FRICTIONAL>(touch, state.hint, branch, state, active, record, sums);
+            self.record::<FRICTIONAL>(
+                touch, state.hint, branch, state, length, active, record, sums,
+            );
         }
     }
 
     /// A frictionless block whose lanes are each apart or a contact in the kernel's regular
     /// case (`contact`): what [`record`](Self::record) writes for each lane, without the cases
     /// of [`DiscPairForces::lane`]. A regular contact is never capped and has no tangential
-    /// force, and a pair of circles keeps its hint.
+    /// force, and a pair of circles keeps its hint. Nor is its state read or written unless
+    /// `springs_to_drop`: in a world without friction between grains every step writes the
+    /// frictionless response's zero spring, so that a pair holds one only after a checkpoint's
+    /// history was restored into it, until the next step. A pair of circles writes its length
+    /// alone (issue #16: reading and writing back its state's line was some 4% of a step of
+    /// rigid discs on LAMMPS's packing).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn record_regular_block(
@@ -619,14 +679,25 @@ impl<'a> PairPass<'a> {
         contact: &[bool; LANES],
         branches: &[PairLanes; 2],
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
         sums: &mut PairSums,
     ) {
         let frictionless = TangentialResponse::default();
-        let open = PairState::default();
-        let (states, actives, records) = (
-            &mut states[..LANES],
+        let states = &mut states[..LANES];
+        if self.springs_to_drop {
+            for state in states.iter_mut() {
+                state.tangential_history = frictionless.history;
+            }
+        }
+        debug_assert!(
+            states
+                .iter()
+                .all(|state| state.tangential_history.to_bits() == frictionless.history.to_bits())
+        );
+        let (lengths, actives, records) = (
+            &mut lengths[..LANES],
             &mut actives[..LANES],
             &mut records[..LANES],
         );
@@ -634,10 +705,8 @@ impl<'a> PairPass<'a> {
         let periodic = self.periodic.is_some();
         for lane in 0..LANES {
             let at = |v: &PairLanes| v.0[lane];
-            let state = &mut states[lane];
             if !contact[lane] {
-                state.tangential_history = open.tangential_history;
-                state.contact_length = open.contact_length;
+                lengths[lane] = 0.0;
                 continue;
             }
             let pair = |v: &[PairLanes; 2]| DVec2::new(at(&v[0]), at(&v[1]));
@@ -649,8 +718,7 @@ impl<'a> PairPass<'a> {
                 cap_area_first: at(&out.cap_area[0]),
                 cap_area_second: at(&out.cap_area[1]),
             };
-            state.tangential_history = frictionless.history;
-            state.contact_length = chord_length(at(&out.half_chord));
+            lengths[lane] = chord_length(at(&out.half_chord));
             if periodic {
                 let branch = pair(branches);
                 let share = symmetric_dyad(records[lane].normal_force_on_first(), branch);
@@ -741,7 +809,7 @@ impl<'a> PolygonsAhead<'a> {
     /// from `lane`, where [`holds_block_from`](Self::holds_block_from) says that they are its
     /// contacts, as
     /// [`PairPass::record`] writes each one's without friction: the contact with its normal
-    /// force, no tangential force, and the hint and length in the state. Takes every lane of
+    /// force, no tangential force, its hint in the state and its length. Takes every lane of
     /// the block.
     #[inline(always)]
     fn record_block(
@@ -749,18 +817,23 @@ impl<'a> PolygonsAhead<'a> {
         lane: usize,
         k: usize,
         states: &mut [PairState],
+        lengths: &mut [f64],
         actives: &mut [bool],
         records: &mut [PairContact],
     ) {
         let pairs = k..k + BLOCK;
-        let (states, actives, records): (
+        let (states, lengths, actives, records): (
             &mut [PairState; BLOCK],
+            &mut [f64; BLOCK],
             &mut [bool; BLOCK],
             &mut [PairContact; BLOCK],
         ) = (
             (&mut states[pairs.clone()])
                 .try_into()
                 .expect("a block's states"),
+            (&mut lengths[pairs.clone()])
+                .try_into()
+                .expect("a block's lengths"),
             (&mut actives[pairs.clone()])
                 .try_into()
                 .expect("a block's flags"),
@@ -779,8 +852,8 @@ impl<'a> PolygonsAhead<'a> {
             states[l] = PairState {
                 hint: hints[l],
                 tangential_history: TangentialResponse::default().history,
-                contact_length: length[l],
             };
+            lengths[l] = length[l];
             actives[l] = true;
         }
         self.taken = lane + BLOCK;
@@ -1745,7 +1818,7 @@ mod tests {
     use rand::SeedableRng;
 
     /// A chunk's pairs' states, flags and records.
-    type Slots = (Vec<PairState>, Vec<bool>, Vec<PairContact>);
+    type Slots = (Vec<PairState>, Vec<f64>, Vec<bool>, Vec<PairContact>);
 
     /// `pass.chunk` over all of the pass's pairs from `start`, held to the one-pair path pair
     /// by pair as it handles any world (with FRICTIONAL, a world without friction gets a zero
@@ -1758,12 +1831,13 @@ mod tests {
         seed: u64,
     ) -> (Slots, PairSums) {
         let mut lanes = start.clone();
-        let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2);
+        let lane_sums = pass.chunk(0, &mut lanes.0, &mut lanes.1, &mut lanes.2, &mut lanes.3);
         let mut one = start.clone();
         let mut one_sums = PairSums::default();
         for p in 0..start.0.len() {
-            let (state, active, record) = (&mut one.0[p], &mut one.1[p], &mut one.2[p]);
-            pass.one_pair::<true>(p, None, state, active, record, &mut one_sums);
+            let (state, length, active, record) =
+                (&mut one.0[p], &mut one.1[p], &mut one.2[p], &mut one.3[p]);
+            pass.one_pair::<true>(p, None, state, length, active, record, &mut one_sums);
         }
         assert_eq!(format!("{lanes:?}"), format!("{one:?}"), "seed {seed}");
         assert_eq!(
@@ -1941,6 +2015,8 @@ mod tests {
                 // Every frame here is a circle: told so, or found so block by block.
                 every_frame_a_circle: seed % 2 == 1,
                 no_frame_a_circle: false,
+                // The pairs start with springs, which the frictionless worlds drop.
+                springs_to_drop: true,
             };
             let count = pairs.len();
             let start: Vec<PairState> = (0..count)
@@ -1951,12 +2027,13 @@ mod tests {
                 .collect();
             let start = (
                 start,
+                vec![0.0; count],
                 vec![false; count],
                 vec![PairContact::default(); count],
             );
             let (lanes, lane_sums) = chunk_is_one_pair_by_pair(&pass, &start, seed);
             // The cases the test means to cover are there.
-            let touching = lanes.1.iter().filter(|&&a| a).count();
+            let touching = lanes.2.iter().filter(|&&a| a).count();
             assert!(
                 touching > count / 2 && touching < count,
                 "{touching} of {count}"
@@ -2066,24 +2143,32 @@ mod tests {
                 only_fast: None,
                 every_frame_a_circle: false,
                 no_frame_a_circle: false,
+                springs_to_drop: false,
             };
             let count = pairs.len();
             let fresh = || {
                 (
                     vec![PairState::default(); count],
+                    vec![0.0; count],
                     vec![false; count],
                     vec![PairContact::default(); count],
                 )
             };
             let mut hinted = fresh();
-            pass(&before).chunk(0, &mut hinted.0, &mut hinted.1, &mut hinted.2);
+            pass(&before).chunk(
+                0,
+                &mut hinted.0,
+                &mut hinted.1,
+                &mut hinted.2,
+                &mut hinted.3,
+            );
             let (lanes, sums) = chunk_is_one_pair_by_pair(&pass(&after), &hinted, seed);
             if floor.is_some() {
                 // Some pairs out of the law's domain, not all: capped, or left without a
                 // contact (their exit reported).
                 let out = match cap {
                     true => sums.capped as usize,
-                    false => lanes.1.iter().filter(|&&a| !a).count(),
+                    false => lanes.2.iter().filter(|&&a| !a).count(),
                 };
                 assert!(out > 0 && out < count, "{out} of {count} out of the domain");
                 let exit = matches!(sums.failure, Some(Instability::ContactDomain { .. }));
@@ -2092,7 +2177,7 @@ mod tests {
             }
             // Every pair touches, and has last step's chains to start from: the blocks' path
             // (the lanes' own test counts how many leave it).
-            assert!(lanes.1.iter().all(|&a| a), "every pair in contact");
+            assert!(lanes.2.iter().all(|&a| a), "every pair in contact");
             assert!(
                 (lanes.0.iter()).all(|state| state.hint.first.lo >= 0 && state.hint.second.lo >= 0),
                 "every pair with a hint"

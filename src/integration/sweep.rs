@@ -154,6 +154,7 @@ pub(super) struct SweepRows<'a> {
     /// Every grain's rows.
     pub grains: GrainChunk<'a>,
     pub pair_states: &'a mut [PairState],
+    pub pair_lengths: &'a mut [f64],
     pub pair_active: &'a mut [bool],
     pub pair_contacts: &'a mut [PairContact],
     /// Where each grain chunk's pairs end (see [`super::pair_chunk_ends`]).
@@ -247,6 +248,7 @@ pub(super) fn sweep<'a>(
             .iter()
             .all(|&len| len == grain_count)
             && rows.pair_states.len() == rows.pair_active.len()
+            && rows.pair_lengths.len() == rows.pair_active.len()
             && rows.pair_active.len() == rows.pair_contacts.len()
             && rows
                 .pair_chunk_ends
@@ -279,6 +281,7 @@ pub(super) fn sweep<'a>(
         reach: RowRuns::new(reach),
         wraps: RowRuns::new(wraps),
         pair_states: RowRuns::new(rows.pair_states),
+        pair_lengths: RowRuns::new(rows.pair_lengths),
         pair_active,
         pair_contacts,
         pair_chunk_ends: rows.pair_chunk_ends,
@@ -758,6 +761,7 @@ struct Writes<'a> {
     reach: RowRuns<'a, f64>,
     wraps: RowRuns<'a, [i64; 2]>,
     pair_states: RowRuns<'a, PairState>,
+    pair_lengths: RowRuns<'a, f64>,
     pair_active: RowRuns<'a, bool>,
     pair_contacts: RowRuns<'a, PairContact>,
     pair_chunk_ends: &'a [usize],
@@ -779,6 +783,7 @@ impl Writes<'_> {
             pass.chunk(
                 start,
                 self.pair_states.run(pairs.clone()),
+                self.pair_lengths.run(pairs.clone()),
                 self.pair_active.run(pairs.clone()),
                 self.pair_contacts.run(pairs),
             )
