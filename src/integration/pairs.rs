@@ -380,6 +380,7 @@ impl<'a> PairPass<'a> {
     /// Pair `p` on its own: any pair of grains, any case. `computed`: the pair's contact and
     /// next hint where a block of polygon lanes found them (see [`PolygonsAhead`]).
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn one_pair<const FRICTIONAL: bool>(
         &self,
         p: usize,
@@ -462,6 +463,7 @@ impl<'a> PairPass<'a> {
     /// lanes, out of the pass's loop.
     #[cold]
     #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
     fn one_pair_left_by_block<const FRICTIONAL: bool>(
         &self,
         p: usize,
