@@ -31,8 +31,9 @@ const WIDEST: f64 = 4.0;
 /// after its release, 2.99 candidate pairs a grain at 0.2 to 0.4 mean radii) rebuilt its list
 /// every 7 to 14 steps at 0.2, and its rigid discs ran 1.05 and 1.06 times as fast at 0.3 and
 /// 0.4 with the same pairs, while the 10⁵ run's gas, whose list lasts a hundred steps, ran 0.95
-/// times as fast at 0.3 (2.45 candidate pairs a grain against 2.33). So the skin widens while lists last fewer than
-/// [`SHORT_LIST`] checks, up to four times the list's own and to `room`, and narrows back
+/// times as fast at 0.3 (2.45 candidate pairs a grain against 2.33). So the skin widens while
+/// lists last fewer than [`SHORT_LIST`] checks, up to four times the list's own and to `room`,
+/// and narrows back
 /// while they last more than [`LONG_LIST`]. The list holds every pair within its skin
 /// whichever it is, and the step's sums take the contacts alone, in an order that does not
 /// depend on the list: the results are the same bits with any skin, only the speed differs.
