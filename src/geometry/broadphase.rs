@@ -33,10 +33,9 @@ const WIDEST: f64 = 4.0;
 /// 0.4 with the same pairs, while the 10⁵ run's gas, whose list lasts a hundred steps, ran 0.95
 /// times as fast at 0.3 (2.45 candidate pairs a grain against 2.33). So the skin widens while
 /// lists last fewer than [`SHORT_LIST`] checks, up to four times the list's own and to `room`,
-/// and narrows back
-/// while they last more than [`LONG_LIST`]. The list holds every pair within its skin
-/// whichever it is, and the step's sums take the contacts alone, in an order that does not
-/// depend on the list: the results are the same bits with any skin, only the speed differs.
+/// and narrows back while they last more than [`LONG_LIST`]. The list holds every pair within
+/// its skin whichever it is, and the step's sums take the contacts alone, in an order that does
+/// not depend on the list: the results are the same bits with any skin, only the speed differs.
 pub fn adapted_skin(skin: f64, base: f64, lasted: u64, room: f64) -> f64 {
     if lasted < SHORT_LIST {
         // Where the room is below the current skin (a cell that shrank), the skin stays.
