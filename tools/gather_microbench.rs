@@ -24,10 +24,17 @@ unsafe fn by_rows(table: &[f64], k: __m256i) -> [__m512d; 8] {
     // Rows to columns in three rounds of shuffles, as the kernel's `load_quads`.
     let pairs: [__m512d; 8] = std::array::from_fn(|p| {
         let (a, b) = (r[2 * (p / 2)], r[2 * (p / 2) + 1]);
-        if p % 2 == 0 { _mm512_unpacklo_pd(a, b) } else { _mm512_unpackhi_pd(a, b) }
+        if p % 2 == 0 {
+            _mm512_unpacklo_pd(a, b)
+        } else {
+            _mm512_unpackhi_pd(a, b)
+        }
     });
     let quads: [__m512d; 8] = std::array::from_fn(|q| {
-        let (a, b) = (pairs[(q % 2) + 4 * (q / 4)], pairs[(q % 2) + 2 + 4 * (q / 4)]);
+        let (a, b) = (
+            pairs[(q % 2) + 4 * (q / 4)],
+            pairs[(q % 2) + 2 + 4 * (q / 4)],
+        );
         if (q / 2) % 2 == 0 {
             _mm512_shuffle_f64x2::<0b10_00_10_00>(a, b)
         } else {
@@ -60,11 +67,17 @@ unsafe fn time(read: Read, table: &[f64], starts: &[i32], repeats: usize) -> (f6
         }
     }
     let calls = (repeats * starts.len() / 8) as f64;
-    (clock.elapsed().as_secs_f64() / calls * 1e9, _mm512_reduce_add_pd(sum))
+    (
+        clock.elapsed().as_secs_f64() / calls * 1e9,
+        _mm512_reduce_add_pd(sum),
+    )
 }
 
 fn main() {
-    assert!(std::arch::is_x86_feature_detected!("avx512f"), "needs AVX-512");
+    assert!(
+        std::arch::is_x86_feature_detected!("avx512f"),
+        "needs AVX-512"
+    );
     let table: Vec<f64> = (0..3000).map(f64::from).collect();
     let mut state = 12345u64;
     let starts: Vec<i32> = (0..4096)
