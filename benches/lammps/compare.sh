@@ -25,6 +25,8 @@ command -v lmp >/dev/null || { echo "lmp not found: apt-get install -y lammps op
 mkdir -p "$here/work" && cp "$here"/in.bench "$here"/in.common "$here"/in.compress "$here/work/" && cd "$here/work"
 results=compare_$n.txt; : > "$results"
 say() { echo "$@" | tee -a "$results"; }
+# What a line keeps of `sdem bench`'s output: its rate and its contacts per grain.
+bench_figures() { echo "$(echo "$1" | grep -o 'grain-steps/s: .*') | $(echo "$1" | head -1 | grep -o 'contacts per grain: [0-9.]*')"; }
 . "$here/packing.sh"
 lammps_packing "$n"
 if [ "${SAME_PACKING:-0}" = 1 ]; then sdem_packing "$n" "$sdem"; fi
@@ -37,14 +39,14 @@ for r in $(seq 1 "$rounds"); do
   for model in full rigid; do
     for t in 1 2; do
       out=$("$sdem" bench --grains "$n" --steps "$ssteps" --warmup "$warmup" --threads "$t" --model "$model")
-      say "sdem model=$model threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+      say "sdem model=$model threads=$t N=$n round=$r $(bench_figures "$out")"
     done
   done
   if [ "${SAME_PACKING:-0}" = 1 ]; then
     for t in 1 2; do
       for order in "" _strips; do
         out=$("$sdem" bench --from sdem_$n$order/checkpoint.bin --steps "$ssteps" --warmup "$warmup" --threads "$t")
-        say "sdem model=rigid-lammps-packing${order/_/-} threads=$t N=$n round=$r $(echo "$out" | grep -o 'grain-steps/s: .*') | $(echo "$out" | head -1 | grep -o 'contacts per grain: [0-9.]*')"
+        say "sdem model=rigid-lammps-packing${order/_/-} threads=$t N=$n round=$r $(bench_figures "$out")"
       done
     done
   fi

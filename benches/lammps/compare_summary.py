@@ -25,7 +25,12 @@ STARVED = 1.3
 
 # Issue #16's goals at 10^5 grains: (code, cores) -> least ratio to LAMMPS; code -> least
 # speed-up of 2 cores over 1.
-RATIO_GOALS = {("sdem full", 1): 0.5, ("sdem full", 2): 0.5, ("sdem rigid", 1): 1.0, ("sdem rigid", 2): 1.0}
+RATIO_GOALS = {
+    ("sdem full", 1): 0.5,
+    ("sdem full", 2): 0.5,
+    ("sdem rigid", 1): 1.0,
+    ("sdem rigid", 2): 1.0,
+}
 SPEEDUP_GOALS = {"sdem full": 1.84, "sdem rigid": 1.84}
 
 
@@ -47,6 +52,10 @@ def read_rates(paths):
     return rates, rounds
 
 
+def medians(rates):
+    return {key: statistics.median(v) for key, v in rates.items()}
+
+
 def goal_figures(median):
     """Each goal's figure from medians of rates: ratios to LAMMPS, and 2-core speed-ups."""
     figures = {}
@@ -66,14 +75,15 @@ def goals_by_sitting(paths, pooled):
     sittings = []
     for path in paths:
         rates, _ = read_rates([path])
-        sittings.append(goal_figures({key: statistics.median(v) for key, v in rates.items()}))
+        sittings.append(goal_figures(medians(rates)))
     lines = ["", f"issue #16's goals, sitting by sitting ({len(paths)} sittings), and pooled"]
     for name, (value, goal) in goal_figures(pooled).items():
         each = [s[name][0] for s in sittings if name in s]
         met = sum(v >= goal for v in each)
         lines.append(
             f"{name:36s} goal {goal:4.2f}: " + " ".join(f"{v:.3f}" for v in each)
-            + f"  met in {met} of {len(each)}; pooled {value:.3f} ({'met' if value >= goal else 'not met'})"
+            + f"  met in {met} of {len(each)}; pooled {value:.3f}"
+            + f" ({'met' if value >= goal else 'not met'})"
         )
     return lines
 
@@ -82,7 +92,7 @@ def main(paths):
     rates, rounds = read_rates(paths)
     if not rates:
         sys.exit(f"no compare.sh lines in {', '.join(paths)}")
-    median = {key: statistics.median(v) for key, v in rates.items()}
+    median = medians(rates)
     counts = sorted({len(v) for v in rates.values()})
     lines = [
         "",

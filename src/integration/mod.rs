@@ -615,15 +615,15 @@ pub struct World {
     /// not a field of the state, so that a pair of rigid discs, whose state does not change,
     /// writes 8 bytes a step instead of writing back its state's line (issue #16),
     pair_length: Vec<f64>,
-    /// Whether some pair may hold a tangential spring though the world has no friction between
-    /// grains: after a checkpoint's history was restored into it, until its next step, which
-    /// drops them (see [`pairs::PairPass::springs_to_drop`]).
-    pair_springs_to_drop: bool,
     /// whether it touched in the last step,
     pair_active: Vec<bool>,
     /// and its contact where it did (a stale record elsewhere: read through
     /// [`World::contacts`]).
     pair_contacts: Vec<PairContact>,
+    /// Whether some pair may hold a tangential spring though the world has no friction between
+    /// grains: after a checkpoint's history was restored into it, until its next step, which
+    /// drops them (see [`pairs::PairPass::springs_to_drop`]).
+    pair_springs_to_drop: bool,
     /// Where the pair pass's chunks end (see [`pair_chunk_ends`]), recomputed with the list.
     pair_chunk_ends: Vec<usize>,
     /// The least first grain of each grain chunk's pairs
@@ -736,9 +736,9 @@ impl World {
             circle_frames: 0,
             pair_state: Vec::new(),
             pair_length: Vec::new(),
-            pair_springs_to_drop: false,
             pair_active: Vec::new(),
             pair_contacts: Vec::new(),
+            pair_springs_to_drop: false,
             pair_chunk_ends: Vec::new(),
             earliest_first_grains: Vec::new(),
             sweep_plan: SweepPlan::default(),

@@ -1819,7 +1819,7 @@ mod tests {
     use crate::sample::unit_random;
     use rand::SeedableRng;
 
-    /// A chunk's pairs' states, flags and records.
+    /// A chunk's pairs' states, contact lengths, flags and records.
     type Slots = (Vec<PairState>, Vec<f64>, Vec<bool>, Vec<PairContact>);
 
     /// `pass.chunk` over all of the pass's pairs from `start`, held to the one-pair path pair
