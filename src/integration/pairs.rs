@@ -210,6 +210,9 @@ impl<'a> PairPass<'a> {
         let mut sums = PairSums::default();
         let count = states.len();
         let mut lanes = None;
+        // No block of circles starts before this pair of the chunk: a pair that is not one of
+        // two circles, found by a block's test, is in the windows of the pairs up to it too.
+        let mut circle_blocks_from = 0;
         let mut k = 0;
         while k < count {
             let p = first_pair + k;
@@ -235,7 +238,16 @@ impl<'a> PairPass<'a> {
                 k += 1;
                 continue;
             }
-            if k + LANES <= count && self.all_circles(p) {
+            if k + LANES <= count
+                && k >= circle_blocks_from
+                && match self.first_not_circles(p) {
+                    None => true,
+                    Some(lane) => {
+                        circle_blocks_from = k + lane + 1;
+                        false
+                    }
+                }
+            {
                 for lane in 0..LANES {
                     self.prefetch_ahead::<1>(p + lane, CIRCLE_PREFETCH_AHEAD);
                 }
@@ -352,14 +364,20 @@ impl<'a> PairPass<'a> {
         }
     }
 
-    /// Whether the `LANES` pairs from pair `p` on are all pairs of two circles.
+    /// The first of the `LANES` pairs from pair `p` on that is not a pair of two circles (its
+    /// offset from `p`), or None where all are.
     #[inline(always)]
-    fn all_circles(&self, p: usize) -> bool {
-        !self.no_frame_a_circle
-            && (self.every_frame_a_circle
-                || self.pairs[p..p + LANES].iter().all(|&[i, j]| {
-                    self.frames.row(i as usize).circle && self.frames.row(j as usize).circle
-                }))
+    fn first_not_circles(&self, p: usize) -> Option<usize> {
+        if self.every_frame_a_circle {
+            None
+        } else if self.no_frame_a_circle {
+            // Every pair is one: the last of the window too.
+            Some(LANES - 1)
+        } else {
+            self.pairs[p..p + LANES].iter().position(|&[i, j]| {
+                !(self.frames.row(i as usize).circle && self.frames.row(j as usize).circle)
+            })
+        }
     }
 
     #[inline(always)]
