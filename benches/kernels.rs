@@ -314,6 +314,8 @@ mod disc_pairs {
                 mass: lanes(|_| 4.5e-4),
                 velocity: [lanes(|l| 1e-3 * l as f64), lanes(|_| 0.0)],
                 omega: lanes(|_| 0.1),
+                // Rigid discs: no dilation.
+                dilation: lanes(|_| 0.0),
             },
             second: DiscLanes {
                 center: [
@@ -324,6 +326,7 @@ mod disc_pairs {
                 mass: lanes(|_| 4.6e-4),
                 velocity: [lanes(|_| 0.0), lanes(|l| -1e-3 * l as f64)],
                 omega: lanes(|_| -0.2),
+                dilation: lanes(|_| 0.0),
             },
             affine_rate: [lanes(|_| 0.0), lanes(|_| 0.0)],
         }

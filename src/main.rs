@@ -117,8 +117,8 @@ enum Command {
         /// Coulomb friction coefficient of every contact (0: frictionless).
         #[arg(long, default_value_t = 0.0)]
         friction: f64,
-        /// Model level of every grain: rigid discs (closed-form circle contacts), discs with one
-        /// volumetric strain, or the full SDEM grain.
+        /// Model level of every grain: rigid discs, discs with one volumetric strain (both with
+        /// closed-form circle contacts), or the full SDEM grain.
         #[arg(long, value_enum, default_value_t = BenchModel::Full)]
         model: BenchModel,
         /// Time the steps of a run's own state instead of the dense packing: the world of an

@@ -1,4 +1,5 @@
-//! Closed-form contacts of exact circles: rigid discs need no contour polygon (issue #16).
+//! Closed-form contacts of exact circles: discs (rigid grains, and grains at the volumetric
+//! level, whose strains stay equal) need no contour polygon (issue #16).
 //!
 //! SPEC §5 defines a contact on the two contours: the crossing points P, P', the chord length
 //! `L_c = |PP'|`, the point `x_c = (P + P')/2`, the caps cut off by the chord and their depths.

@@ -309,11 +309,11 @@ mod avx {
         assert!(size_of::<GrainStress>() == 7 * 8);
         assert!(size_of::<Frame>() == 16 * 8);
         // A circle's first line as the rigid block writes it: centre, radius, mass; velocity,
-        // spin, the flag's byte.
+        // spin, dilation rate.
         use std::mem::offset_of;
         assert!(offset_of!(Frame, center) == 0 && offset_of!(Frame, bounding_radius) == 16);
         assert!(offset_of!(Frame, mass) == 24 && offset_of!(Frame, velocity) == 32);
-        assert!(offset_of!(Frame, omega) == 48 && offset_of!(Frame, circle) == 56);
+        assert!(offset_of!(Frame, omega) == 48 && offset_of!(Frame, circle_dilation) == 56);
     };
 
     /// Four `f64` lanes in an AVX register, with [`Real`]'s arithmetic: the operations of
@@ -553,19 +553,19 @@ mod avx {
         store(lanes.elastic_energy, &mut outcome.elastic_energy);
         if RIGID {
             // Circles all: their frames' first lines (`Frame::write_circle`'s centre, radius
-            // `R (1 + eps1)`, mass, velocity, spin and flag) by two transposes.
+            // `R (1 + eps1)`, mass, velocity, spin and the rigid level's dilation rate, zero)
+            // by two transposes.
             let circles = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(d.eps1.0, d.eps2.0));
             if circles == 0b1111 {
                 let bounding_radius = d.radius * (F64x4::splat(1.0) + d.eps1);
-                // `true` in the flag's byte, zeros in the line's padding after it.
-                let flag = _mm256_castsi256_pd(_mm256_set1_epi64x(1));
+                let dilation = _mm256_setzero_pd();
                 let heads = transpose([
                     d.center[0].0,
                     d.center[1].0,
                     bounding_radius.0,
                     lanes.mass.0,
                 ]);
-                let tails = transpose([d.velocity[0].0, d.velocity[1].0, d.omega.0, flag]);
+                let tails = transpose([d.velocity[0].0, d.velocity[1].0, d.omega.0, dilation]);
                 let lines = frames.as_mut_ptr().cast::<f64>();
                 for l in 0..BLOCK_GRAINS {
                     _mm256_storeu_pd(lines.add(16 * l), heads[l]);
@@ -610,7 +610,8 @@ mod avx {
                 d.velocity[0].0,
                 d.velocity[1].0,
                 d.omega.0,
-                _mm256_setzero_pd(),
+                // Not a circle (`Frame::circle_dilation`'s NaN).
+                _mm256_set1_pd(super::super::NOT_A_CIRCLE),
             ]),
             matrix(&maps),
             matrix(&gradients),
@@ -676,22 +677,24 @@ mod tests {
         );
         assert_eq!(stress_words[6], 7 | 9 << 32);
 
-        // Every byte written first, so that the padding after the flag reads as zeros.
-        // SAFETY: a frame is plain data, all zeros a valid one (`circle: false`).
-        let mut frame: Frame = unsafe { std::mem::zeroed() };
-        frame.center = DVec2::new(value(0), value(1));
-        frame.bounding_radius = value(2);
-        frame.mass = value(3);
-        frame.velocity = DVec2::new(value(4), value(5));
-        frame.omega = value(6);
-        frame.circle = true;
-        frame.map = DMat2::from_cols_array(&[value(8), value(9), value(10), value(11)]);
-        frame.velocity_gradient =
-            DMat2::from_cols_array(&[value(12), value(13), value(14), value(15)]);
+        let frame = Frame {
+            center: DVec2::new(value(0), value(1)),
+            bounding_radius: value(2),
+            mass: value(3),
+            velocity: DVec2::new(value(4), value(5)),
+            omega: value(6),
+            circle_dilation: value(7),
+            map: DMat2::from_cols_array(&[value(8), value(9), value(10), value(11)]),
+            velocity_gradient: DMat2::from_cols_array(&[
+                value(12),
+                value(13),
+                value(14),
+                value(15),
+            ]),
+        };
         let frame_words = words::<_, 16>(&frame);
         for (k, &word) in frame_words.iter().enumerate() {
-            let expected = if k == 7 { 1 } else { value(k).to_bits() };
-            assert_eq!(word, expected, "word {k}");
+            assert_eq!(word, value(k).to_bits(), "word {k}");
         }
     }
 }

@@ -472,11 +472,12 @@ impl GrainPass<'_> {
                 }
                 let frame = &mut chunk.frames[k];
                 // A grain whose level changed takes the frame of its new level (a rigid one
-                // that rose is no longer a circle), as `write_frames` would have written it.
+                // that rose to the full level is no longer a circle, one that rose to the
+                // volumetric level dilates), as `write_frames` would have written it.
                 let changed = stepped_down || (rigid && level.level != ModelLevel::Rigid);
                 if changed {
                     frame.write(grain, level.level, density);
-                    sums.circle_frames += frame.circle as usize;
+                    sums.circle_frames += frame.circle() as usize;
                     continue;
                 }
                 sums.circle_frames += rigid as usize;
@@ -716,7 +717,7 @@ impl GrainPass<'_> {
             if !walls.near(w) || wall.height(frame.center) >= frame.bounding_radius {
                 continue;
             }
-            let overlap = if frame.circle {
+            let overlap = if frame.circle() {
                 disc_wall(frame.center, frame.bounding_radius, wall.point, wall.normal)
             } else {
                 self.contours
@@ -930,8 +931,9 @@ fn write_frames(
             continue;
         }
         let grain = &chunk.grains[k];
-        if Frame::is_circle(grain, chunk.levels[k].level) {
-            chunk.frames[k].write_circle(grain, density);
+        let level = chunk.levels[k].level;
+        if Frame::is_circle(grain, level) {
+            chunk.frames[k].write_circle(grain, level, density);
             sums.circle_frames += 1;
         } else {
             block[filled] = k;
@@ -1555,7 +1557,7 @@ mod tests {
     }
 
     fn frame_bits(f: &Frame) -> Vec<u64> {
-        let mut bits = vec![u64::from(f.circle)];
+        let mut bits = vec![u64::from(f.circle())];
         for x in [
             f.center.x,
             f.center.y,
@@ -1564,6 +1566,7 @@ mod tests {
             f.velocity.x,
             f.velocity.y,
             f.omega,
+            f.circle_dilation,
         ]
         .into_iter()
         .chain(f.map.to_cols_array())
@@ -1792,7 +1795,7 @@ mod tests {
                 for l in 0..BLOCK_GRAINS {
                     let mut frame = Frame::default();
                     if circles {
-                        frame.write_circle(&updated[l], density);
+                        frame.write_circle(&updated[l], ModelLevel::Rigid, density);
                     }
                     let at = format!("circle frame: case {case}, trial {trial}, lane {l}");
                     assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");

@@ -63,11 +63,12 @@ pub const MAX_WALLS: usize = 8;
 /// What a grain's neighbours need from it during one step.
 ///
 /// Two cache lines, aligned: the first holds all that a circle's contacts read (centre, radius,
-/// mass, velocity, spin), so that the passes load one line per circle where they loaded three
-/// from the 152 bytes this was (issue #16: those loads were the run's largest cost). A circle's
-/// frame writes only that line; the second, the shape map and velocity gradient of a grain that
-/// is not a circle, is rebuilt from the radius and spin when a circle needs it.
-#[derive(Debug, Clone, Copy, Default)]
+/// mass, velocity, spin, dilation rate), so that the passes load one line per circle where
+/// they loaded three from the 152 bytes this was (issue #16: those loads were the run's
+/// largest cost). A circle's frame writes only that line; the second, the shape map and
+/// velocity gradient of a grain that is not a circle, is rebuilt from the radius, spin and
+/// dilation rate when a circle needs it.
+#[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
 pub struct Frame {
     pub center: DVec2,
@@ -76,13 +77,16 @@ pub struct Frame {
     pub bounding_radius: f64,
     pub mass: f64,
     pub velocity: DVec2,
-    /// Spin omega (read for circles only: their velocity gradient is `omega J`).
+    /// Spin omega (read for circles only: their velocity gradient is `omega J + d I`).
     pub omega: f64,
-    /// The grain is an exact circle of radius `bounding_radius` (a grain at the rigid level
-    /// whose strains are equal: a disc, or one held at a volumetric strain). Its contacts with
-    /// walls and with other such grains take the closed forms of
-    /// [`circle`](crate::geometry::circle) instead of the contour polygon (issue #16).
-    pub circle: bool,
+    /// Where the grain is an exact circle of radius `bounding_radius` ([`Frame::is_circle`]:
+    /// a grain below the full level whose strains are equal), the rate `d` at which it
+    /// dilates (its radius grows at `d` times itself: zero at the rigid level); NaN where it
+    /// is not a circle ([`Frame::circle`]). A circle's contacts with walls and with other
+    /// circles take the closed forms of [`circle`](crate::geometry::circle) instead of the
+    /// contour polygon (issue #16). One word for the flag and the rate, so that a circle's
+    /// contacts still read one line.
+    circle_dilation: f64,
     /// `A R` (see [`GrainShape::map`]); not written for a circle.
     map: DMat2,
     /// Velocity gradient of the grain's affine motion (see [`Grain::velocity_gradient`]); not
@@ -96,6 +100,25 @@ const _: () = assert!(
         && std::mem::offset_of!(Frame, bounding_radius) == 16
         && std::mem::offset_of!(Frame, mass) == 24
 );
+
+/// [`Frame::circle_dilation`] of a frame that is not a circle.
+const NOT_A_CIRCLE: f64 = f64::NAN;
+
+impl Default for Frame {
+    /// A frame of zeros that is not a circle.
+    fn default() -> Self {
+        Frame {
+            center: DVec2::ZERO,
+            bounding_radius: 0.0,
+            mass: 0.0,
+            velocity: DVec2::ZERO,
+            omega: 0.0,
+            circle_dilation: NOT_A_CIRCLE,
+            map: DMat2::ZERO,
+            velocity_gradient: DMat2::ZERO,
+        }
+    }
+}
 
 impl Frame {
     /// The frame of a grain at its current state.
@@ -114,7 +137,7 @@ impl Frame {
             mass: grain.mass(density),
             velocity: grain.velocity,
             omega: grain.omega,
-            circle: false,
+            circle_dilation: NOT_A_CIRCLE,
             map,
             velocity_gradient,
         }
@@ -201,28 +224,49 @@ impl Frame {
     #[inline]
     pub fn write(&mut self, grain: &Grain, level: ModelLevel, density: f64) {
         if Self::is_circle(grain, level) {
-            self.write_circle(grain, density);
+            self.write_circle(grain, level, density);
         } else {
             *self = Frame::of_grain(grain, density);
         }
     }
 
-    /// Whether the frame of `grain` at `level` is a circle (see [`Frame::circle`]).
+    /// Whether the frame of `grain` at `level` is a circle: a rigid or volumetric grain whose
+    /// strains are equal (a disc, or one held or evolving at a volumetric strain: the
+    /// volumetric level moves both strains by the same rate, so they stay equal).
     #[inline(always)]
     pub fn is_circle(grain: &Grain, level: ModelLevel) -> bool {
-        level == ModelLevel::Rigid && grain.eps1 == grain.eps2
+        level != ModelLevel::Full && grain.eps1 == grain.eps2
     }
 
-    /// The frame of a rigid grain whose strains are equal: a circle of radius `R (1 + eps)`.
-    /// Only the first line is written (see [`Frame`]).
+    /// Whether this frame is a circle (see [`Frame::is_circle`]).
+    #[inline(always)]
+    pub fn circle(&self) -> bool {
+        !self.circle_dilation.is_nan()
+    }
+
+    /// The rate at which a circle's radius `R (1 + eps)` grows, relative to itself:
+    /// `eps_rate / (1 + eps)`, the diagonal of the grain's velocity gradient
+    /// ([`Grain::velocity_gradient`] for equal strains); zero at the rigid level, whose rates
+    /// are held at zero.
+    #[inline(always)]
+    pub fn circle_dilation_rate(grain: &Grain, level: ModelLevel) -> f64 {
+        if level == ModelLevel::Rigid {
+            0.0
+        } else {
+            grain.eps1_rate / (1.0 + grain.eps1)
+        }
+    }
+
+    /// The frame of a grain at `level` that is a circle ([`Frame::is_circle`]): a circle of
+    /// radius `R (1 + eps)`. Only the first line is written (see [`Frame`]).
     #[inline]
-    pub fn write_circle(&mut self, grain: &Grain, density: f64) {
+    pub fn write_circle(&mut self, grain: &Grain, level: ModelLevel, density: f64) {
         self.center = grain.center;
         self.bounding_radius = grain.radius * (1.0 + grain.eps1);
         self.mass = grain.mass(density);
         self.velocity = grain.velocity;
         self.omega = grain.omega;
-        self.circle = true;
+        self.circle_dilation = Self::circle_dilation_rate(grain, level);
     }
 
     /// The contour polygon's shape. A circle's polygon, needed only where it meets a grain
@@ -231,7 +275,7 @@ impl Frame {
     /// frame needs no sine or cosine.
     #[inline]
     pub fn shape(&self) -> GrainShape {
-        if self.circle {
+        if self.circle() {
             let radius = self.bounding_radius;
             GrainShape {
                 center: self.center,
@@ -253,7 +297,7 @@ impl Frame {
     /// circle (a circle's map is not kept).
     #[inline(always)]
     pub fn lane_shape(&self) -> LaneShape<'_> {
-        debug_assert!(!self.circle);
+        debug_assert!(!self.circle());
         // SAFETY: the frame is `repr(C)`, its first four fields four f64s (the centre is a
         // `repr(C)` `DVec2`): checked at compile time (the assertion before `impl Frame`).
         let center_and_radius = unsafe { &*(self as *const Frame).cast::<[f64; 4]>() };
@@ -263,12 +307,13 @@ impl Frame {
         }
     }
 
-    /// Velocity gradient of the grain's affine motion: for a circle the rigid rotation
-    /// `omega J` (a rigid grain's strain rates are zero).
+    /// Velocity gradient of the grain's affine motion: for a circle the rotation and dilation
+    /// `omega J + d I` ([`circle_velocity_gradient`]).
     #[inline]
     pub fn velocity_gradient(&self) -> DMat2 {
-        if self.circle {
-            QUARTER_TURN * self.omega
+        if self.circle() {
+            let [x_axis, y_axis] = circle_velocity_gradient(self.omega, self.circle_dilation);
+            DMat2::from_cols(DVec2::from(x_axis), DVec2::from(y_axis))
         } else {
             self.velocity_gradient
         }
@@ -281,16 +326,34 @@ impl Frame {
     }
 }
 
-/// Velocity of the point at `offset` from a circle's centre, `v + omega J offset`, for
-/// [lanes](crate::lanes) of circles: the products of [`Frame::velocity_at`] for a circle
-/// (`QUARTER_TURN * omega` times the offset), zeros included. `Frame::velocity_at` keeps glam's
-/// form: routed through this function it cost the full level 36 instructions a grain-step
-/// (callgrind), for the same bits.
+/// The velocity gradient `omega J + d I` of a circle that spins at `omega` and dilates at `d`
+/// ([`Frame::circle_dilation_rate`]), by columns: off the diagonal `QUARTER_TURN`'s entries
+/// times omega, on it d (J's diagonal is zero). For a circle's frame
+/// ([`Frame::velocity_gradient`]) and its [lanes](crate::lanes) ([`circle_velocity_at`])
+/// alike, so that the two give the same bits.
 #[inline(always)]
-pub(crate) fn circle_velocity_at<T: Real>(velocity: [T; 2], omega: T, offset: [T; 2]) -> [T; 2] {
+pub(crate) fn circle_velocity_gradient<T: Real>(omega: T, dilation: T) -> [[T; 2]; 2] {
+    const { assert!(QUARTER_TURN.x_axis.x == 0.0 && QUARTER_TURN.y_axis.y == 0.0) };
     let q = |entry: f64| T::splat(entry) * omega;
-    let (xx, xy) = (q(QUARTER_TURN.x_axis.x), q(QUARTER_TURN.x_axis.y));
-    let (yx, yy) = (q(QUARTER_TURN.y_axis.x), q(QUARTER_TURN.y_axis.y));
+    [
+        [dilation, q(QUARTER_TURN.x_axis.y)],
+        [q(QUARTER_TURN.y_axis.x), dilation],
+    ]
+}
+
+/// Velocity of the point at `offset` from a circle's centre, `v + (omega J + d I) offset`,
+/// for [lanes](crate::lanes) of circles: the products of [`Frame::velocity_at`] for a circle
+/// ([`circle_velocity_gradient`] times the offset, as glam's product orders them), zeros
+/// included. `Frame::velocity_at` keeps glam's form: routed through this function it cost the
+/// full level 36 instructions a grain-step (callgrind), for the same bits.
+#[inline(always)]
+pub(crate) fn circle_velocity_at<T: Real>(
+    velocity: [T; 2],
+    omega: T,
+    dilation: T,
+    offset: [T; 2],
+) -> [T; 2] {
+    let [[xx, xy], [yx, yy]] = circle_velocity_gradient(omega, dilation);
     [
         velocity[0] + (xx * offset[0] + yx * offset[1]),
         velocity[1] + (xy * offset[0] + yy * offset[1]),
@@ -953,7 +1016,11 @@ impl World {
                     *center = frame.center;
                     *reach = frame.bounding_radius;
                 });
-            self.circle_frames = self.frames.par_iter().filter(|frame| frame.circle).count();
+            self.circle_frames = self
+                .frames
+                .par_iter()
+                .filter(|frame| frame.circle())
+                .count();
             self.frames_current = true;
         }
         let frames_done = Instant::now();
@@ -1979,9 +2046,9 @@ mod tests {
             f.velocity.x.to_bits(),
             f.velocity.y.to_bits(),
             f.omega.to_bits(),
-            f.circle as u64,
+            f.circle_dilation.to_bits(),
         ];
-        if !f.circle {
+        if !f.circle() {
             v.extend(bits(f.map));
             v.extend(bits(f.velocity_gradient));
         }
@@ -2003,14 +2070,14 @@ mod tests {
                 return Err(format!("grain {g}: broad-phase copies differ"));
             }
         }
-        let all_circles = world.frames.iter().all(|frame| frame.circle);
+        let all_circles = world.frames.iter().all(|frame| frame.circle());
         if world.frames_all_circles() != all_circles {
             return Err(format!(
                 "frames_all_circles is {}, every frame a circle: {all_circles}",
                 world.frames_all_circles()
             ));
         }
-        let no_circle = !world.frames.iter().any(|frame| frame.circle);
+        let no_circle = !world.frames.iter().any(|frame| frame.circle());
         if world.frames_no_circle() != no_circle {
             return Err(format!(
                 "frames_no_circle is {}, no frame a circle: {no_circle}",
@@ -2097,7 +2164,7 @@ mod tests {
             .collect();
         world.set_levels(&levels);
         assert!(!world.frames_current);
-        let circles = |w: &World| w.frames.iter().filter(|f| f.circle).count();
+        let circles = |w: &World| w.frames.iter().filter(|f| f.circle()).count();
         for _ in 0..20 {
             world.step().unwrap();
             assert!(world.frames_current);
@@ -2191,7 +2258,7 @@ mod tests {
         // fields all in the first.
         assert_eq!(std::mem::size_of::<Frame>(), 128);
         assert_eq!(std::mem::align_of::<Frame>(), 64);
-        let circle_end = std::mem::offset_of!(Frame, circle) + 1;
+        let circle_end = std::mem::offset_of!(Frame, circle_dilation) + 8;
         assert!(circle_end <= 64, "circle fields end at byte {circle_end}");
         assert!(std::mem::offset_of!(Frame, map) >= 64);
     }
@@ -2210,7 +2277,7 @@ mod tests {
         let g = deformed_grain();
         let (shape, gradient) = g.shape_and_velocity_gradient();
         let frame = Frame::of_grain(&g, 2.0);
-        assert!(!frame.circle);
+        assert!(!frame.circle());
         assert_eq!(shape_bits(&frame.shape()), shape_bits(&shape));
         assert_eq!(bits(frame.velocity_gradient()), bits(gradient));
         let x = DVec2::new(0.31, -0.19);
@@ -2222,7 +2289,8 @@ mod tests {
         let mut disc = deformed_grain();
         disc.eps2 = disc.eps1;
         let mut frame = Frame::of_grain(&g, 2.0);
-        frame.write_circle(&disc, 2.0);
+        assert!(Frame::is_circle(&disc, ModelLevel::Rigid));
+        frame.write_circle(&disc, ModelLevel::Rigid, 2.0);
         let radius = disc.radius * (1.0 + disc.eps1);
         let expected = GrainShape {
             center: disc.center,
@@ -2230,16 +2298,43 @@ mod tests {
             bounding_radius: radius,
             circle: true,
         };
-        assert!(frame.circle);
+        assert!(frame.circle());
         assert_eq!(shape_bits(&frame.shape()), shape_bits(&expected));
-        assert_eq!(
-            bits(frame.velocity_gradient()),
-            bits(QUARTER_TURN * disc.omega)
-        );
+        assert_eq!(frame.velocity_gradient(), QUARTER_TURN * disc.omega);
         let arm = x - disc.center;
         assert_eq!(
             frame.velocity_at(x),
             disc.velocity + disc.omega * DVec2::new(-arm.y, arm.x)
         );
+
+        // At the volumetric level the same disc dilates: both strains at one rate, its
+        // velocity field is the grain's own (`Grain::velocity_gradient`, through the angles'
+        // sines and cosines: equal to rounding), `omega J + eps_rate / (1 + eps) I`.
+        disc.eps1_rate = -0.37;
+        disc.eps2_rate = disc.eps1_rate;
+        disc.alpha_rate = 0.0;
+        assert!(Frame::is_circle(&disc, ModelLevel::Volumetric));
+        assert!(!Frame::is_circle(&disc, ModelLevel::Full));
+        frame.write_circle(&disc, ModelLevel::Volumetric, 2.0);
+        assert!(frame.circle());
+        assert_eq!(shape_bits(&frame.shape()), shape_bits(&expected));
+        let gradient = disc.velocity_gradient();
+        let dilation = disc.eps1_rate / (1.0 + disc.eps1);
+        for (k, (circle, grain)) in bits(frame.velocity_gradient())
+            .map(f64::from_bits)
+            .into_iter()
+            .zip(bits(gradient).map(f64::from_bits))
+            .enumerate()
+        {
+            assert!(
+                (circle - grain).abs() < 1e-14,
+                "entry {k}: {circle} against {grain}"
+            );
+        }
+        let expected_velocity =
+            disc.velocity + disc.omega * DVec2::new(-arm.y, arm.x) + dilation * arm;
+        assert!((frame.velocity_at(x) - expected_velocity).length() < 1e-14);
+        // A deformed grain is no circle at any level.
+        assert!(!Frame::is_circle(&g, ModelLevel::Volumetric));
     }
 }

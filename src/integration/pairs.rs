@@ -1,11 +1,11 @@
 //! The pair pass of the step: the contact geometry and force of every candidate pair, written to
 //! the pair's own slot, and the sums over a chunk's contacts in pair order.
 //!
-//! Pairs of two circles (rigid discs, or discs held at a volumetric strain) take the closed
-//! forms of [`circle`](crate::geometry::circle); where [`LANES`] consecutive pairs of a chunk are
-//! all such pairs, they are computed side by side in the [lanes](crate::lanes) of one kernel
-//! ([`disc_pair_forces`]), which vector instructions run four (AVX) or two (SSE2) at a time
-//! (issue #16). Lane by lane, the kernel is the same sequence of operations as the one-pair
+//! Pairs of two circles (rigid discs, or discs at or held at a volumetric strain) take the
+//! closed forms of [`circle`](crate::geometry::circle); where [`LANES`] consecutive pairs of a
+//! chunk are all such pairs, they are computed side by side in the [lanes](crate::lanes) of
+//! one kernel ([`disc_pair_forces`]), which vector instructions run four (AVX) or two (SSE2)
+//! at a time (issue #16). Lane by lane, the kernel is the same sequence of operations as the one-pair
 //! path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
 //! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
 //! computed again by the one-pair path, which handles those cases.
@@ -326,7 +326,7 @@ impl<'a> PairPass<'a> {
             && hint.second.lo >= 0
             && (self.no_frame_a_circle || {
                 let [i, j] = self.pairs[p];
-                !self.frames.row(i as usize).circle && !self.frames.row(j as usize).circle
+                !self.frames.row(i as usize).circle() && !self.frames.row(j as usize).circle()
             })
     }
 
@@ -375,7 +375,7 @@ impl<'a> PairPass<'a> {
             Some(LANES - 1)
         } else {
             self.pairs[p..p + LANES].iter().position(|&[i, j]| {
-                !(self.frames.row(i as usize).circle && self.frames.row(j as usize).circle)
+                !(self.frames.row(i as usize).circle() && self.frames.row(j as usize).circle())
             })
         }
     }
@@ -416,7 +416,7 @@ impl<'a> PairPass<'a> {
         let overlap = if let Some((contact, next_hint)) = computed {
             hint = next_hint;
             Overlap::Contact(contact)
-        } else if fi.circle && fj.circle {
+        } else if fi.circle() && fj.circle() {
             disc_disc(
                 fi.center,
                 fi.bounding_radius,
@@ -1002,7 +1002,7 @@ static SPARE_FRAME: Frame = Frame {
     mass: 0.0,
     velocity: DVec2::ZERO,
     omega: 0.0,
-    circle: false,
+    circle_dilation: super::NOT_A_CIRCLE,
     map: DMat2::ZERO,
     velocity_gradient: DMat2::ZERO,
 };
@@ -1273,7 +1273,8 @@ pub struct DiscPairs<T> {
     pub affine_rate: [T; 2],
 }
 
-/// One circle of each pair: lanes of centres, radii, masses, velocities and spins.
+/// One circle of each pair: lanes of centres, radii, masses, velocities, spins and dilation
+/// rates ([`Frame::circle_dilation_rate`]).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct DiscLanes<T> {
     pub center: [T; 2],
@@ -1281,13 +1282,14 @@ pub struct DiscLanes<T> {
     pub mass: T,
     pub velocity: [T; 2],
     pub omega: T,
+    pub dilation: T,
 }
 
 impl DiscLanes<PairLanes> {
     /// The lanes in the order of [`FRAME_LINE`]: centre x, centre y, radius, mass, velocity x,
-    /// velocity y, spin.
+    /// velocity y, spin, dilation rate.
     #[inline(always)]
-    fn in_frame_order(&mut self) -> [&mut PairLanes; 7] {
+    fn in_frame_order(&mut self) -> [&mut PairLanes; 8] {
         let [x, y] = &mut self.center;
         let [vx, vy] = &mut self.velocity;
         [
@@ -1298,6 +1300,7 @@ impl DiscLanes<PairLanes> {
             vx,
             vy,
             &mut self.omega,
+            &mut self.dilation,
         ]
     }
 
@@ -1312,6 +1315,7 @@ impl DiscLanes<PairLanes> {
             frame.velocity.x,
             frame.velocity.y,
             frame.omega,
+            frame.circle_dilation,
         ];
         for (lanes, value) in self.in_frame_order().into_iter().zip(values) {
             lanes.0[lane] = value;
@@ -1392,9 +1396,9 @@ impl DiscPairs<PairLanes> {
     }
 
     /// [`set_circles`](Self::set_circles) with AVX-512: for each circle of the pairs, the eight
-    /// frames' (centre, radius, mass) loaded as two-frame vectors and transposed, their
-    /// velocities interleaved, their spins gathered (issue #16: the eight lanes in one register
-    /// each, where AVX took two quads of four).
+    /// frames' halves of a line (centre, radius, mass; velocity, spin, dilation rate) loaded as
+    /// two-frame vectors and transposed (issue #16: the eight lanes in one register each, where
+    /// AVX took two quads of four).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     fn set_circles_avx512(&mut self, ends: &[(&Frame, &Frame); LANES]) {
@@ -1408,59 +1412,36 @@ impl DiscPairs<PairLanes> {
             // The loads read through a pointer to the whole frame (a pointer to one field may
             // not read past it).
             let line = |k: usize| (frame(k) as *const Frame).cast::<f64>();
-            // SAFETY: as in `set_circles_avx`: a frame is aligned to 64 bytes and holds its
-            // centre, radius and mass in its first 32 bytes and its velocity in the next 16
-            // (`FRAME_LINE`), all initialised f64s; the lanes are stored unaligned, eight
-            // values each.
+            // SAFETY: as in `set_circles_avx`: a frame is aligned to 64 bytes and holds the
+            // eight f64s of `FRAME_LINE` in its first line, all initialised; the lanes are
+            // stored unaligned, eight values each.
             unsafe {
-                let first_half = |k: usize| _mm256_load_pd(line(k));
-                // Frames k and k + 4 in one register: [k | k + 4].
-                let pair = |k: usize| {
+                // Half `h` of the line of frames k and k + 4 in one register: [k | k + 4].
+                let pair = |k: usize, h: usize| {
                     _mm512_insertf64x4::<1>(
-                        _mm512_castpd256_pd512(first_half(k)),
-                        first_half(k + 4),
+                        _mm512_castpd256_pd512(_mm256_load_pd(line(k).add(4 * h))),
+                        _mm256_load_pd(line(k + 4).add(4 * h)),
                     )
                 };
-                let (z0, z1, z2, z3) = (pair(0), pair(1), pair(2), pair(3));
-                // Per 256-bit half: (x, x', radius, radius') and (y, y', mass, mass') of two
-                // consecutive frames.
-                let (t0, t1) = (_mm512_unpacklo_pd(z0, z1), _mm512_unpackhi_pd(z0, z1));
-                let (t2, t3) = (_mm512_unpacklo_pd(z2, z3), _mm512_unpackhi_pd(z2, z3));
                 let even = _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13);
                 let odd = _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15);
-                let velocity = |k: usize| _mm_load_pd(line(k).add(FRAME_LINE[4] / 8));
-                // Frames (k, k + 2) and (k + 4, k + 6) in one register's four quarters.
-                let quarters = |k: usize| {
-                    let low = _mm256_insertf128_pd::<1>(
-                        _mm256_castpd128_pd256(velocity(k)),
-                        velocity(k + 2),
-                    );
-                    let high = _mm256_insertf128_pd::<1>(
-                        _mm256_castpd128_pd256(velocity(k + 4)),
-                        velocity(k + 6),
-                    );
-                    _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(low), high)
+                // The four words of half `h` of the eight frames, a register each.
+                let transposed = |h: usize| {
+                    let (z0, z1, z2, z3) = (pair(0, h), pair(1, h), pair(2, h), pair(3, h));
+                    // Per 256-bit half: words (0, 0', 2, 2') and (1, 1', 3, 3') of two
+                    // consecutive frames.
+                    let (t0, t1) = (_mm512_unpacklo_pd(z0, z1), _mm512_unpackhi_pd(z0, z1));
+                    let (t2, t3) = (_mm512_unpacklo_pd(z2, z3), _mm512_unpackhi_pd(z2, z3));
+                    [
+                        _mm512_permutex2var_pd(t0, even, t2),
+                        _mm512_permutex2var_pd(t1, even, t3),
+                        _mm512_permutex2var_pd(t0, odd, t2),
+                        _mm512_permutex2var_pd(t1, odd, t3),
+                    ]
                 };
-                let (u0, u1) = (quarters(0), quarters(1));
-                let omega = _mm512_setr_pd(
-                    frame(0).omega,
-                    frame(1).omega,
-                    frame(2).omega,
-                    frame(3).omega,
-                    frame(4).omega,
-                    frame(5).omega,
-                    frame(6).omega,
-                    frame(7).omega,
-                );
-                let values = [
-                    _mm512_permutex2var_pd(t0, even, t2),
-                    _mm512_permutex2var_pd(t1, even, t3),
-                    _mm512_permutex2var_pd(t0, odd, t2),
-                    _mm512_permutex2var_pd(t1, odd, t3),
-                    _mm512_unpacklo_pd(u0, u1),
-                    _mm512_unpackhi_pd(u0, u1),
-                    omega,
-                ];
+                let [x, y, radius, mass] = transposed(0);
+                let [vx, vy, omega, dilation] = transposed(1);
+                let values = [x, y, radius, mass, vx, vy, omega, dilation];
                 for (lanes, value) in circles.in_frame_order().into_iter().zip(values) {
                     _mm512_storeu_pd(lanes.0.as_mut_ptr(), value);
                 }
@@ -1469,8 +1450,8 @@ impl DiscPairs<PairLanes> {
     }
 
     /// [`set_circles`](Self::set_circles) with AVX: for each circle of the pairs and each four
-    /// lanes, the four frames' (centre, radius, mass) loaded as four vectors and transposed,
-    /// their velocities as two-lane vectors interleaved, their spins gathered.
+    /// lanes, the four frames' halves of a line (centre, radius, mass; velocity, spin,
+    /// dilation rate) loaded as four vectors each and transposed.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn set_circles_avx(&mut self, ends: &[(&Frame, &Frame); LANES]) {
@@ -1484,36 +1465,27 @@ impl DiscPairs<PairLanes> {
                 // The loads read through a pointer to the whole frame (a pointer to one field
                 // may not read past it).
                 let line = |k: usize| (frame(k) as *const Frame).cast::<f64>();
-                // SAFETY: a frame is aligned to 64 bytes and holds its centre, radius and mass
-                // in its first 32 bytes and its velocity in the next 16 (as `FRAME_LINE`
-                // asserts), all initialised f64s; a lane vector is aligned to 32 bytes and the
-                // four lanes from `4 quad` are within its eight.
+                // SAFETY: a frame is aligned to 64 bytes and holds the eight f64s of
+                // `FRAME_LINE` in its first line (as `FRAME_LINE` asserts), all initialised; a
+                // lane vector is aligned to 32 bytes and the four lanes from `4 quad` are
+                // within its eight.
                 unsafe {
-                    let first_half = |k: usize| _mm256_load_pd(line(k));
-                    let (a0, a1, a2, a3) =
-                        (first_half(0), first_half(1), first_half(2), first_half(3));
-                    let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
-                    let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
-                    let velocity = |k: usize| _mm_load_pd(line(k).add(FRAME_LINE[4] / 8));
-                    let u0 =
-                        _mm256_insertf128_pd(_mm256_castpd128_pd256(velocity(0)), velocity(2), 1);
-                    let u1 =
-                        _mm256_insertf128_pd(_mm256_castpd128_pd256(velocity(1)), velocity(3), 1);
-                    let omega = _mm256_set_pd(
-                        frame(3).omega,
-                        frame(2).omega,
-                        frame(1).omega,
-                        frame(0).omega,
-                    );
-                    let values = [
-                        _mm256_permute2f128_pd(t0, t2, 0x20),
-                        _mm256_permute2f128_pd(t1, t3, 0x20),
-                        _mm256_permute2f128_pd(t0, t2, 0x31),
-                        _mm256_permute2f128_pd(t1, t3, 0x31),
-                        _mm256_unpacklo_pd(u0, u1),
-                        _mm256_unpackhi_pd(u0, u1),
-                        omega,
-                    ];
+                    // The four words of half `h` of the four frames, a vector each.
+                    let transposed = |h: usize| {
+                        let half = |k: usize| _mm256_load_pd(line(k).add(4 * h));
+                        let (a0, a1, a2, a3) = (half(0), half(1), half(2), half(3));
+                        let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
+                        let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
+                        [
+                            _mm256_permute2f128_pd(t0, t2, 0x20),
+                            _mm256_permute2f128_pd(t1, t3, 0x20),
+                            _mm256_permute2f128_pd(t0, t2, 0x31),
+                            _mm256_permute2f128_pd(t1, t3, 0x31),
+                        ]
+                    };
+                    let [x, y, radius, mass] = transposed(0);
+                    let [vx, vy, omega, dilation] = transposed(1);
+                    let values = [x, y, radius, mass, vx, vy, omega, dilation];
                     for (lanes, value) in circles.in_frame_order().into_iter().zip(values) {
                         _mm256_store_pd(lanes.0.as_mut_ptr().add(4 * quad), value);
                     }
@@ -1525,8 +1497,9 @@ impl DiscPairs<PairLanes> {
 
 /// The byte offsets in a [`Frame`] of what a circle's lanes read, in the order of
 /// [`DiscLanes::in_frame_order`]: centre x and y, radius and mass in the first 32 bytes, then
-/// the velocity and the spin, which the vector loads of [`DiscPairs::set_circles`] rely on.
-const FRAME_LINE: [usize; 7] = [0, 8, 16, 24, 32, 40, 48];
+/// the velocity, the spin and the dilation rate in the next 32, which the vector loads of
+/// [`DiscPairs::set_circles`] rely on.
+const FRAME_LINE: [usize; 8] = [0, 8, 16, 24, 32, 40, 48, 56];
 const _: () = {
     use std::mem::offset_of;
     let center = offset_of!(Frame, center);
@@ -1538,6 +1511,7 @@ const _: () = {
     assert!(velocity + offset_of!(DVec2, x) == FRAME_LINE[4]);
     assert!(velocity + offset_of!(DVec2, y) == FRAME_LINE[5]);
     assert!(offset_of!(Frame, omega) == FRAME_LINE[6]);
+    assert!(offset_of!(Frame, circle_dilation) == FRAME_LINE[7]);
     assert!(std::mem::align_of::<Frame>() >= 32);
     assert!(std::mem::align_of::<PairLanes>() >= 32);
 };
@@ -1751,11 +1725,13 @@ pub fn disc_pair_forces<T: Real>(
     let velocity_j = circle_velocity_at(
         input.second.velocity,
         input.second.omega,
+        input.second.dilation,
         [point[0] - cj[0], point[1] - cj[1]],
     );
     let velocity_i = circle_velocity_at(
         input.first.velocity,
         input.first.omega,
+        input.first.dilation,
         [point[0] - ci[0], point[1] - ci[1]],
     );
     let contact = ((length, normal_gap), &normal);
@@ -1832,7 +1808,7 @@ disc_pair_forces_for!(disc_pair_forces_avx, "avx");
 mod tests {
     use super::*;
     use crate::contact::friction::FrictionSettings;
-    use crate::grain::{Grain, Material};
+    use crate::grain::{Grain, Material, ModelLevel};
     use crate::integration::parameters::Friction;
     use crate::sample::unit_random;
     use rand::SeedableRng;
@@ -1901,7 +1877,16 @@ mod tests {
                     g.eps1 += 0.02;
                     frame = Frame::of_grain(&g, density);
                 } else {
-                    frame.write_circle(&g, density);
+                    // Rigid discs, and discs at the volumetric level that dilate (both
+                    // strains at one rate), half and half.
+                    let level = if random(0.0, 1.0) < 0.5 {
+                        ModelLevel::Rigid
+                    } else {
+                        let rate = random(-0.5, 0.5);
+                        (g.eps1_rate, g.eps2_rate) = (rate, rate);
+                        ModelLevel::Volumetric
+                    };
+                    frame.write_circle(&g, level, density);
                 }
                 frame
             };
@@ -1966,6 +1951,7 @@ mod tests {
                 mass: lanes(|_| 3.0),
                 velocity: [lanes(|_| 0.1), lanes(|_| 0.0)],
                 omega: lanes(|_| 0.2),
+                dilation: lanes(|_| 0.0),
             },
             second: DiscLanes {
                 center: [lanes(|l| 5.0 * l as f64 + distance(l)), lanes(|_| 0.0)],
@@ -1973,6 +1959,7 @@ mod tests {
                 mass: lanes(|_| 3.0),
                 velocity: [lanes(|_| -0.1), lanes(|_| 0.0)],
                 omega: lanes(|_| -0.2),
+                dilation: lanes(|_| 0.0),
             },
             affine_rate: [lanes(|_| 0.0), lanes(|_| 0.0)],
         };
@@ -2260,11 +2247,14 @@ mod tests {
         // holds what setting the lanes one value at a time puts there.
         let mut one_by_one =
             assert_shuffled_as_one_by_one("set_circles", |lanes, ends| lanes.set_circles(ends));
-        // Every lane was set (no value of the frames is zero).
+        // Every lane was set (no value of the frames is zero but the rigid discs' dilation
+        // rates; the dilating discs' are not).
         for circles in [&mut one_by_one.first, &mut one_by_one.second] {
             let lanes = circles.in_frame_order();
-            assert!(lanes.iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
+            assert!(lanes[..7].iter().all(|l| l.0.iter().all(|&x| x != 0.0)));
         }
+        let dilations = [one_by_one.first.dilation, one_by_one.second.dilation];
+        assert!(dilations.iter().any(|l| l.0.iter().any(|&x| x != 0.0)));
     }
 
     #[test]

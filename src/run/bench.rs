@@ -82,7 +82,7 @@ pub fn dense_packing(grains: usize, resolution_deg: f64) -> World {
 
 /// Puts every grain of a [`dense_packing`] at the model level `level` (a rigid disc, a disc with
 /// one volumetric strain, or the full SDEM grain), with the time step at the same fraction of
-/// that level's critical step. Rigid discs take the closed-form circle contacts.
+/// that level's critical step. Discs (rigid or volumetric) take the closed-form circle contacts.
 pub fn with_model(world: &mut World, level: ModelLevel) {
     let p = &mut world.params;
     p.level = level;
