@@ -1450,8 +1450,8 @@ impl DiscPairs<PairLanes> {
     }
 
     /// [`set_circles`](Self::set_circles) with AVX: for each circle of the pairs and each four
-    /// lanes, the four frames' halves of a line (centre, radius, mass; velocity, spin,
-    /// dilation rate) loaded as four vectors each and transposed.
+    /// lanes, the four frames' (centre, radius, mass) loaded as four vectors and transposed,
+    /// their (velocity) and (spin, dilation rate) as two-lane vectors interleaved.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn set_circles_avx(&mut self, ends: &[(&Frame, &Frame); LANES]) {
@@ -1470,21 +1470,35 @@ impl DiscPairs<PairLanes> {
                 // lane vector is aligned to 32 bytes and the four lanes from `4 quad` are
                 // within its eight.
                 unsafe {
-                    // The four words of half `h` of the four frames, a vector each.
-                    let transposed = |h: usize| {
-                        let half = |k: usize| _mm256_load_pd(line(k).add(4 * h));
-                        let (a0, a1, a2, a3) = (half(0), half(1), half(2), half(3));
-                        let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
-                        let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
-                        [
-                            _mm256_permute2f128_pd(t0, t2, 0x20),
-                            _mm256_permute2f128_pd(t1, t3, 0x20),
-                            _mm256_permute2f128_pd(t0, t2, 0x31),
-                            _mm256_permute2f128_pd(t1, t3, 0x31),
-                        ]
+                    let first_half = |k: usize| _mm256_load_pd(line(k));
+                    let (a0, a1, a2, a3) =
+                        (first_half(0), first_half(1), first_half(2), first_half(3));
+                    let (t0, t1) = (_mm256_unpacklo_pd(a0, a1), _mm256_unpackhi_pd(a0, a1));
+                    let (t2, t3) = (_mm256_unpacklo_pd(a2, a3), _mm256_unpackhi_pd(a2, a3));
+                    let x = _mm256_permute2f128_pd(t0, t2, 0x20);
+                    let y = _mm256_permute2f128_pd(t1, t3, 0x20);
+                    let radius = _mm256_permute2f128_pd(t0, t2, 0x31);
+                    let mass = _mm256_permute2f128_pd(t1, t3, 0x31);
+                    // The second half's two pairs of words, (velocity x, y) and (spin,
+                    // dilation rate), each as two-lane vectors of frames (k, k + 2)
+                    // interleaved: fewer lane-crossing shuffles than its transpose (which made
+                    // the whole `set_circles_avx` a fifth slower on the rigid lattice).
+                    let words = |k: usize, w: usize| _mm_load_pd(line(k).add(w));
+                    let interleaved = |w: usize| {
+                        let u0 = _mm256_insertf128_pd(
+                            _mm256_castpd128_pd256(words(0, w)),
+                            words(2, w),
+                            1,
+                        );
+                        let u1 = _mm256_insertf128_pd(
+                            _mm256_castpd128_pd256(words(1, w)),
+                            words(3, w),
+                            1,
+                        );
+                        [_mm256_unpacklo_pd(u0, u1), _mm256_unpackhi_pd(u0, u1)]
                     };
-                    let [x, y, radius, mass] = transposed(0);
-                    let [vx, vy, omega, dilation] = transposed(1);
+                    let [vx, vy] = interleaved(FRAME_LINE[4] / 8);
+                    let [omega, dilation] = interleaved(FRAME_LINE[6] / 8);
                     let values = [x, y, radius, mass, vx, vy, omega, dilation];
                     for (lanes, value) in circles.in_frame_order().into_iter().zip(values) {
                         _mm256_store_pd(lanes.0.as_mut_ptr().add(4 * quad), value);
