@@ -5,8 +5,8 @@
 //! closed forms of [`circle`](crate::geometry::circle); where [`LANES`] consecutive pairs of a
 //! chunk are all such pairs, they are computed side by side in the [lanes](crate::lanes) of
 //! one kernel ([`disc_pair_forces`]), which vector instructions run four (AVX) or two (SSE2)
-//! at a time (issue #16). Lane by lane, the kernel is the same sequence of operations as the one-pair
-//! path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
+//! at a time (issue #16). Lane by lane, the kernel is the same sequence of operations as the
+//! one-pair path: the same bits. A lane that leaves the kernel's regular case (an irregular contact: one
 //! circle swallowing the other, a vanishing chord, a deep cap, the law out of its domain) is
 //! computed again by the one-pair path, which handles those cases.
 //!
@@ -371,7 +371,7 @@ impl<'a> PairPass<'a> {
         if self.every_frame_a_circle {
             None
         } else if self.no_frame_a_circle {
-            // Every pair is one: the last of the window too.
+            // No pair is one of two circles: the window's last is not, either.
             Some(LANES - 1)
         } else {
             self.pairs[p..p + LANES].iter().position(|&[i, j]| {
