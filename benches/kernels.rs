@@ -529,8 +529,9 @@ fn sin_cos_of_turned_grains(bencher: divan::Bencher, lanes: bool) {
     });
 }
 
-/// The frames of 4,096 deforming grains: one at a time (`Frame::of_grain`) against blocks of
-/// four (`Frame::write_full_block`, the grain pass's way).
+/// The frames and principal directions of 4,096 deforming grains: one at a time
+/// (`Frame::of_grain_and_direction`) against blocks of four (`Frame::write_full_block`, the
+/// grain pass's way).
 #[divan::bench(args = [false, true])]
 fn frames_of_deforming_grains(bencher: divan::Bencher, blocks: bool) {
     use sdem::grain::Grain;
@@ -550,17 +551,18 @@ fn frames_of_deforming_grains(bencher: divan::Bencher, blocks: bool) {
         })
         .collect();
     let mut frames = vec![Frame::default(); grains.len()];
+    let mut directions = vec![DVec2::ZERO; grains.len()];
     bencher.bench_local(|| {
         if blocks {
             for first in (0..grains.len()).step_by(FRAME_LANES) {
                 let block = std::array::from_fn(|l| first + l);
-                Frame::write_full_block(&mut frames, &grains, block, 1.0);
+                Frame::write_full_block(&mut frames, &mut directions, &grains, block, 1.0);
             }
         } else {
-            for (frame, grain) in frames.iter_mut().zip(&grains) {
-                *frame = Frame::of_grain(grain, 1.0);
+            for ((frame, direction), grain) in frames.iter_mut().zip(&mut directions).zip(&grains) {
+                (*frame, *direction) = Frame::of_grain_and_direction(grain, 1.0);
             }
         }
-        black_box(&frames);
+        black_box((&frames, &directions));
     });
 }

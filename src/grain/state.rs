@@ -4,7 +4,7 @@
 //! field of a grain together; the contact kernels read a separate compact array of
 //! [`GrainShape`](crate::geometry::GrainShape)s built once per step.
 
-use crate::geometry::affine::{AffineState, map_and_velocity_gradient};
+use crate::geometry::affine::{AffineState, map_and_velocity_gradient, principal_direction};
 use crate::geometry::angle;
 use crate::geometry::contour::GrainShape;
 use glam::{DMat2, DVec2};
@@ -142,10 +142,11 @@ impl Grain {
         self.reference_area() * (1.0 + self.eps1) * (1.0 + self.eps2)
     }
 
-    /// Direction of the principal axis e1, at angle theta + alpha.
+    /// Direction of the principal axis e1, at angle theta + alpha: the rotation by theta of
+    /// the unit vector at alpha ([`principal_direction`]), as the grain's frame gives it.
     #[inline]
     pub fn principal_direction(&self) -> DVec2 {
-        angle::unit_vector(self.theta + self.alpha)
+        DVec2::from(principal_direction(&self.affine_state()))
     }
 
     pub fn shape(&self) -> GrainShape {

@@ -89,7 +89,8 @@ pub(super) fn blocks_available() -> bool {
 /// one-grain update; writes their stress records to `stresses`, with the loads' lost areas
 /// and `contacts` (each grain's pair and wall contacts), and their frames for the next step
 /// to `frames` ([`Frame::of_grain`], bit for bit: a grain's frame of the step's start is read
-/// by its own contacts only, which are behind it). `e1`: the grains' principal directions.
+/// by its own contacts only, which are behind it). `e1`: the grains' principal directions,
+/// replaced by those of the updated grains ([`Frame::of_grain_and_direction`]'s).
 /// Only where [`blocks_available`] says so.
 #[inline(always)]
 pub(super) fn advance_full_block(
@@ -98,7 +99,7 @@ pub(super) fn advance_full_block(
     frames: &mut [Frame],
     loads: &BlockLoads,
     contacts: &[[u32; 2]; BLOCK_GRAINS],
-    e1: &[DVec2],
+    e1: &mut [DVec2],
     constants: &BlockConstants<'_>,
 ) -> BlockOutcome {
     assert!(
@@ -147,7 +148,15 @@ pub(super) fn advance_rigid_block(
         // SAFETY: the processor has AVX (asserted just above), and the slices hold four
         // records each; a rigid block reads no direction.
         unsafe {
-            avx::advance_block::<true>(grains, stresses, frames, loads, contacts, &[], constants)
+            avx::advance_block::<true>(
+                grains,
+                stresses,
+                frames,
+                loads,
+                contacts,
+                &mut [],
+                constants,
+            )
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -422,7 +431,7 @@ mod avx {
         frames: &mut [Frame],
         loads: &BlockLoads,
         contacts: &[[u32; 2]; BLOCK_GRAINS],
-        e1: &[DVec2],
+        e1: &mut [DVec2],
         constants: &BlockConstants<'_>,
     ) -> BlockOutcome {
         let base = grains.as_mut_ptr().cast::<f64>();
@@ -452,7 +461,7 @@ mod avx {
             alpha,
             alpha_rate,
         };
-        let e1 = if RIGID {
+        let e1_lanes = if RIGID {
             [F64x4::splat(0.0); 2]
         } else {
             // The directions `[c0, s0, c1, s1]`, `[c2, s2, c3, s3]` to cosines and sines.
@@ -479,7 +488,7 @@ mod avx {
             ],
             lost_area: load(&loads.lost_area),
         };
-        let lanes = advance_lanes::<F64x4, RIGID>(&mut dofs, &load_lanes, e1, constants);
+        let lanes = advance_lanes::<F64x4, RIGID>(&mut dofs, &load_lanes, e1_lanes, constants);
         let d = dofs;
         let quarters = [
             [d.radius, d.center[0], d.center[1], d.velocity[0]],
@@ -589,7 +598,7 @@ mod avx {
         store(d.alpha_rate, &mut states.alpha_rate);
         store(d.omega, &mut states.omega);
         store(d.radius, &mut states.radius);
-        let (maps, gradients) = super::super::affine_lanes_avx(&angles, &states);
+        let (maps, gradients, directions) = super::super::affine_lanes_avx(&angles, &states);
         let bounding_radius = GrainShape::bounding_radius_of(d.radius, d.eps1, d.eps2);
         let matrix = |m: &crate::geometry::affine::Mat2<GrainLanes>| {
             transpose([
@@ -622,6 +631,15 @@ mod avx {
                 _mm256_storeu_pd(frame_words.add(16 * l + 4 * quarter), row);
             }
         }
+        // The directions back as `[c0, s0, c1, s1]`, `[c2, s2, c3, s3]`.
+        let (cosines, sines) = (load(&directions[0]).0, load(&directions[1]).0);
+        let (low, high) = (
+            _mm256_unpacklo_pd(cosines, sines),
+            _mm256_unpackhi_pd(cosines, sines),
+        );
+        let words = e1.as_mut_ptr().cast::<f64>();
+        _mm256_storeu_pd(words, _mm256_permute2f128_pd(low, high, 0x20));
+        _mm256_storeu_pd(words.add(4), _mm256_permute2f128_pd(low, high, 0x31));
         outcome
     }
 }

@@ -17,7 +17,7 @@ use crate::boundary::walls::Wall;
 use crate::contact::law::damped_normal_force;
 use crate::geometry::broadphase::NeighborList;
 use crate::geometry::circle::disc_wall;
-use crate::geometry::{Contours, Overlap, angle};
+use crate::geometry::{Contours, Overlap};
 use crate::grain::adaptive::stress_invariants;
 use crate::grain::constitutive::{
     Moduli, incompressible_strains, principal_stress, strain_energy_density,
@@ -25,7 +25,6 @@ use crate::grain::constitutive::{
 use crate::grain::{Grain, GrainLevel, ModelLevel};
 use crate::lanes::Lanes;
 use glam::{DMat2, DVec2};
-use std::mem::MaybeUninit;
 
 /// What the grain pass reads, shared by every chunk.
 pub(super) struct GrainPass<'a> {
@@ -135,17 +134,6 @@ impl GrainPass<'_> {
             full += (level.level == ModelLevel::Full) as usize;
             rigid += (level.level == ModelLevel::Rigid) as usize;
         }
-        // Rigid grains read no principal direction: a chunk of them is given zeros without a
-        // pass over its grains (issue #16: that pass was 3.5% of a rigid step on LAMMPS's 10⁵
-        // packing, as much for the grains' prefetch as for the directions).
-        // Not zeroed first: the 4 KB memset was 16 instructions a grain-step under callgrind
-        // (`rep stosb`), and every entry a grain reads is written.
-        let mut directions = [MaybeUninit::<DVec2>::uninit(); GRAIN_CHUNK];
-        let directions = if rigid == n {
-            &NO_DIRECTIONS[..n]
-        } else {
-            principal_directions(chunk.grains, chunk.levels, &mut directions)
-        };
         let chunk_walls = ChunkWalls {
             walls,
             near,
@@ -169,19 +157,19 @@ impl GrainPass<'_> {
                 chunk_level,
                 chunk_walls,
                 &constants,
-                directions,
                 &mut sums,
             )
         } else {
             let grains_at = chunk.grains.as_ptr();
             let stresses_at = chunk.stresses.as_ptr();
-            for (k, ((((grain, stress), level), wall_history), frame)) in chunk
+            for (k, (((((grain, stress), level), wall_history), frame), &direction)) in chunk
                 .grains
                 .iter_mut()
                 .zip(chunk.stresses.iter_mut())
                 .zip(chunk.levels.iter_mut())
                 .zip(chunk.wall_histories.iter_mut())
                 .zip(chunk.frames.iter())
+                .zip(chunk.directions.iter())
                 .enumerate()
             {
                 // The state of the grain 8 ahead, and the stress record it will write.
@@ -197,7 +185,7 @@ impl GrainPass<'_> {
                     &mut chunk.wraps[k],
                     chunk_walls,
                     &constants,
-                    directions[k],
+                    direction,
                     &mut sums,
                 );
             }
@@ -209,7 +197,7 @@ impl GrainPass<'_> {
 
     /// Grain `g` over the pass, alone: its contact loads, its update, its records, sums and
     /// failures. `frame`: its frame at the start of the step; `direction`: its
-    /// [principal direction](Grain::principal_direction) (read unless it is rigid).
+    /// [principal direction](Grain::principal_direction) (read at the full level only).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn one_grain(
@@ -296,7 +284,6 @@ impl GrainPass<'_> {
         chunk_level: Option<ModelLevel>,
         chunk_walls: ChunkWalls<'_>,
         constants: &UpdateConstants,
-        directions: &[DVec2],
         sums: &mut ChunkSums,
     ) -> BlocksDone {
         let params = self.params;
@@ -357,7 +344,7 @@ impl GrainPass<'_> {
                             &mut chunk.wraps[k],
                             chunk_walls,
                             constants,
-                            directions[k],
+                            chunk.directions[k],
                             sums,
                         );
                     }
@@ -427,7 +414,7 @@ impl GrainPass<'_> {
                     &mut chunk.frames[block.clone()],
                     &loads,
                     &contacts,
-                    &directions[block],
+                    &mut chunk.directions[block],
                     &block_constants,
                 )
             };
@@ -476,7 +463,7 @@ impl GrainPass<'_> {
                 // volumetric level dilates), as `write_frames` would have written it.
                 let changed = stepped_down || (rigid && level.level != ModelLevel::Rigid);
                 if changed {
-                    frame.write(grain, level.level, density);
+                    frame.write(&mut chunk.directions[k], grain, level.level, density);
                     sums.circle_frames += frame.circle() as usize;
                     continue;
                 }
@@ -939,14 +926,21 @@ fn write_frames(
             block[filled] = k;
             filled += 1;
             if filled == FRAME_LANES {
-                Frame::write_full_block(chunk.frames, chunk.grains, block, density);
+                Frame::write_full_block(
+                    chunk.frames,
+                    chunk.directions,
+                    chunk.grains,
+                    block,
+                    density,
+                );
                 filled = 0;
             }
         }
         k += 1;
     }
     for &k in &block[..filled] {
-        chunk.frames[k] = Frame::of_grain(&chunk.grains[k], density);
+        (chunk.frames[k], chunk.directions[k]) =
+            Frame::of_grain_and_direction(&chunk.grains[k], density);
     }
     for ((frame, center), reach) in chunk
         .frames
@@ -972,6 +966,8 @@ pub(super) struct GrainChunk<'a> {
     pub levels: &'a mut [GrainLevel],
     pub wall_histories: &'a mut [[f64; MAX_WALLS]],
     pub frames: &'a mut [Frame],
+    /// Their grains' principal directions, written with the frames (see `World::directions`).
+    pub directions: &'a mut [DVec2],
     /// The broad phase's copies of the frames' centres and bounding radii.
     pub centers: &'a mut [DVec2],
     pub reach: &'a mut [f64],
@@ -1036,113 +1032,6 @@ impl ChunkWalls<'_> {
     #[inline(always)]
     fn springs(self, w: usize) -> bool {
         self.springs & (1 << w) != 0
-    }
-}
-
-/// The [principal directions](Grain::principal_direction) of a chunk's grains (at most
-/// [`GRAIN_CHUNK`]), written into the first entries of `directions` and returned, the sines
-/// and cosines in lanes of four grains (with AVX where the processor has it): `libm`'s bits
-/// ([`angle::sin_cos_lanes`]). A block of rigid grains, which need none, is given zeros. One
-/// `libm` call a deforming grain was 63 instructions of the full level's grain-step.
-fn principal_directions<'a>(
-    grains: &[Grain],
-    levels: &[GrainLevel],
-    directions: &'a mut [MaybeUninit<DVec2>; GRAIN_CHUNK],
-) -> &'a [DVec2] {
-    let n = grains.len();
-    assert!(n <= GRAIN_CHUNK && levels.len() == n);
-    write_principal_directions(grains, levels, directions);
-    // SAFETY: the first `n` entries were written just above.
-    unsafe { std::slice::from_raw_parts(directions.as_ptr().cast::<DVec2>(), n) }
-}
-
-/// Writes the first `grains.len()` entries of `directions` (see [`principal_directions`]),
-/// with AVX where the processor has it.
-fn write_principal_directions(
-    grains: &[Grain],
-    levels: &[GrainLevel],
-    directions: &mut [MaybeUninit<DVec2>; GRAIN_CHUNK],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX (tested just above).
-        return unsafe { principal_directions_avx(grains, levels, directions) };
-    }
-    principal_directions_in_lanes(grains, levels, directions)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn principal_directions_avx(
-    grains: &[Grain],
-    levels: &[GrainLevel],
-    directions: &mut [MaybeUninit<DVec2>; GRAIN_CHUNK],
-) {
-    principal_directions_in_lanes(grains, levels, directions)
-}
-
-/// Writes the first `grains.len()` entries of `directions` (see [`principal_directions`]).
-#[inline(always)]
-fn principal_directions_in_lanes(
-    grains: &[Grain],
-    levels: &[GrainLevel],
-    directions: &mut [MaybeUninit<DVec2>; GRAIN_CHUNK],
-) {
-    let blocks = grains.chunks_exact(DIRECTION_LANES);
-    let (tail_grains, tail_start) = (
-        blocks.remainder(),
-        grains.len() / DIRECTION_LANES * DIRECTION_LANES,
-    );
-    let grains_at = grains.as_ptr();
-    for (b, ((grains, levels), directions)) in blocks
-        .zip(levels.chunks_exact(DIRECTION_LANES))
-        .zip(directions.chunks_exact_mut(DIRECTION_LANES))
-        .enumerate()
-    {
-        let ahead = grains_at
-            .wrapping_add(DIRECTION_LANES * b + DIRECTIONS_PREFETCH_AHEAD)
-            .cast::<u8>();
-        for line in 0..(DIRECTION_LANES * size_of::<Grain>()).div_ceil(64) {
-            prefetch_address(ahead.wrapping_add(64 * line));
-        }
-        principal_directions_of_block(grains, levels, directions);
-    }
-    principal_directions_of_block(
-        tail_grains,
-        &levels[tail_start..],
-        &mut directions[tail_start..grains.len()],
-    );
-}
-
-const DIRECTION_LANES: usize = 4;
-
-/// The principal directions of a chunk of rigid grains, which read none.
-static NO_DIRECTIONS: [DVec2; GRAIN_CHUNK] = [DVec2::ZERO; GRAIN_CHUNK];
-
-/// How many grains ahead the principal directions ask for a grain's state, the pass's first
-/// read of it.
-const DIRECTIONS_PREFETCH_AHEAD: usize = 16;
-
-/// [`principal_directions`] of up to [`DIRECTION_LANES`] grains.
-#[inline(always)]
-fn principal_directions_of_block(
-    grains: &[Grain],
-    levels: &[GrainLevel],
-    directions: &mut [MaybeUninit<DVec2>],
-) {
-    if levels.iter().all(|level| level.level == ModelLevel::Rigid) {
-        for direction in directions.iter_mut() {
-            direction.write(DVec2::ZERO);
-        }
-        return;
-    }
-    let mut angles = Lanes::<DIRECTION_LANES>::default();
-    for (angle, grain) in angles.0.iter_mut().zip(grains) {
-        *angle = grain.theta + grain.alpha;
-    }
-    let (sin, cos) = angle::sin_cos_lanes(&angles);
-    for (l, direction) in directions.iter_mut().enumerate() {
-        direction.write(DVec2::new(cos.0[l], sin.0[l]));
     }
 }
 
@@ -1271,8 +1160,8 @@ struct GrainUpdate {
 
 /// Stresses, accelerations and the symplectic Euler update of one grain over `dt` (SPEC
 /// §3–§6); the adaptive level's counters advance by `level_steps` steps under the same stress.
-/// `e1`: the grain's [principal direction](Grain::principal_direction) (read unless the grain
-/// is rigid).
+/// `e1`: the grain's [principal direction](Grain::principal_direction) (read at the full level
+/// only).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn advance_grain(
@@ -1287,6 +1176,10 @@ fn advance_grain(
     index: usize,
     step: u64,
 ) -> GrainUpdate {
+    debug_assert!(
+        level.level != ModelLevel::Full || e1 == grain.principal_direction(),
+        "grain {index}: a stale principal direction {e1:?}"
+    );
     let material = &params.material;
     let density = material.density;
     let reference_area = grain.reference_area();
@@ -1294,18 +1187,21 @@ fn advance_grain(
     let current_area = grain.ellipse_area() - load.lost_area;
 
     // Love–Weber stress (eq. 47) and its components in the principal frame {e1, e2}, which only
-    // a deforming grain needs (a rigid one skips the sine and cosine of theta + alpha).
+    // the full level reads; the volumetric level reads their sum, the trace, which is the same
+    // in any frame (its diagonal here: no direction needed).
     let symmetric = 0.5 * (load.moment + load.moment.transpose());
     let external = symmetric * (1.0 / current_area.max(f64::MIN_POSITIVE));
-    let (ext11, ext22, ext12) = if level.level == ModelLevel::Rigid {
-        (0.0, 0.0, 0.0)
-    } else {
-        let e2 = e1.perp();
-        (
-            e1.dot(external * e1),
-            e2.dot(external * e2),
-            e1.dot(external * e2),
-        )
+    let (ext11, ext22, ext12) = match level.level {
+        ModelLevel::Rigid => (0.0, 0.0, 0.0),
+        ModelLevel::Volumetric => (external.x_axis.x, external.y_axis.y, 0.0),
+        ModelLevel::Full => {
+            let e2 = e1.perp();
+            (
+                e1.dot(external * e1),
+                e2.dot(external * e2),
+                e1.dot(external * e2),
+            )
+        }
     };
     let moduli = &constants.moduli;
     let (sigma1, sigma2) = principal_stress(moduli, grain.eps1, grain.eps2, lost_fraction);
@@ -1491,55 +1387,6 @@ fn check_grain(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn principal_directions_in_lanes_are_each_grains_own_bits() {
-        // Expectation: the chunk's lanes give `Grain::principal_direction` (libm's sincos of
-        // theta + alpha) bit for bit for every grain that is not rigid, whatever its block, in
-        // chunks whose length is not a multiple of the lanes, with angles past a turn and
-        // negative; rigid grains, which read none, get a direction all the same.
-        for n in [1, 3, 4, 7, 61, GRAIN_CHUNK] {
-            let grains: Vec<Grain> = (0..n)
-                .map(|k| Grain {
-                    theta: 0.37 * k as f64 - 9.0,
-                    alpha: if k % 5 == 0 {
-                        0.0
-                    } else {
-                        1.3 - 0.11 * k as f64
-                    },
-                    ..Grain::at_rest(DVec2::ZERO, 1.0)
-                })
-                .collect();
-            let levels: Vec<GrainLevel> = (0..n)
-                .map(|k| {
-                    GrainLevel::new(match k % 7 {
-                        0..=3 => ModelLevel::Rigid,
-                        4 => ModelLevel::Volumetric,
-                        _ => ModelLevel::Full,
-                    })
-                })
-                .collect();
-            let mut storage = [MaybeUninit::<DVec2>::uninit(); GRAIN_CHUNK];
-            let directions = principal_directions(&grains, &levels, &mut storage);
-            assert_eq!(directions.len(), n);
-            let mut deforming = 0;
-            for (k, ((grain, level), direction)) in
-                grains.iter().zip(&levels).zip(directions).enumerate()
-            {
-                if level.level == ModelLevel::Rigid {
-                    continue;
-                }
-                deforming += 1;
-                let expected = grain.principal_direction();
-                assert_eq!(
-                    (direction.x.to_bits(), direction.y.to_bits()),
-                    (expected.x.to_bits(), expected.y.to_bits()),
-                    "grain {k} of {n}"
-                );
-            }
-            assert!(n < 5 || deforming > 0);
-        }
-    }
 
     /// A value's bits, every NaN as one: IEEE leaves a NaN's sign and payload open, and a
     /// vector instruction may give another NaN than its scalar twin (seen in the frame of an
@@ -1757,20 +1604,26 @@ mod tests {
                 let mut block = grains;
                 let mut stresses = [GrainStress::default(); BLOCK_GRAINS];
                 let mut frames = [Frame::default(); BLOCK_GRAINS];
+                let mut block_directions = directions;
                 let outcome = advance_full_block(
                     &mut block,
                     &mut stresses,
                     &mut frames,
                     &block_loads,
                     &contacts,
-                    &directions,
+                    &mut block_directions,
                     &block_constants,
                 );
                 flagged += compare("full", &block, &stresses, &outcome, &updated, &updates);
                 for l in 0..BLOCK_GRAINS {
-                    let frame = Frame::of_grain(&updated[l], density);
+                    let (frame, direction) = Frame::of_grain_and_direction(&updated[l], density);
                     let at = format!("frame: case {case}, trial {trial}, lane {l}");
                     assert_eq!(frame_bits(&frames[l]), frame_bits(&frame), "{at}");
+                    assert_eq!(
+                        block_directions[l].to_array().map(bits),
+                        direction.to_array().map(bits),
+                        "{at}"
+                    );
                 }
 
                 // The same grains at the rigid level: the rigid block against the one-grain
@@ -1806,6 +1659,75 @@ mod tests {
             flagged,
             2 * 3 * 3,
             "each case's three failing grains, at either level"
+        );
+    }
+
+    #[test]
+    fn the_volumetric_update_reads_the_trace_and_no_direction() {
+        // Expectation: the volumetric level moves the mean strain by the mean of the external
+        // stress's principal components, the trace's half, which is the same in any frame: its
+        // update is the same, every bit, whatever direction it is handed, and within rounding
+        // of the update that projects the stress on the grain's own principal axes.
+        use crate::grain::constitutive::Material;
+        let material = Material {
+            young: 1.0,
+            poisson: 0.5,
+            density: 1.3,
+        };
+        let params = Parameters::new(material, 1e-3);
+        let constants = UpdateConstants::new(&params);
+        let grain = Grain {
+            theta: 0.7,
+            alpha: -2.1,
+            eps1: -0.04,
+            eps2: -0.04,
+            eps1_rate: 0.01,
+            eps2_rate: 0.01,
+            ..Grain::at_rest(DVec2::new(0.5, 0.25), 1.0)
+        };
+        let load = ContactLoad {
+            force: DVec2::new(1e-3, -2e-3),
+            torque: 1e-4,
+            moment: DMat2::from_cols(DVec2::new(-0.03, 0.004), DVec2::new(0.006, -0.02)),
+            lost_area: 0.01,
+            contacts: 3,
+            wall_contacts: 0,
+        };
+        let update = |e1: DVec2| {
+            let mut updated = grain;
+            let mut level = GrainLevel::new(ModelLevel::Volumetric);
+            advance_grain(
+                &params,
+                params.dt,
+                1,
+                &mut updated,
+                &mut level,
+                &load,
+                &constants,
+                e1,
+                0,
+                1,
+            );
+            updated
+        };
+        let along_axes = update(grain.principal_direction());
+        for e1 in [DVec2::X, DVec2::new(0.6, -0.8), DVec2::ZERO] {
+            assert_eq!(
+                update(e1).to_array().map(bits),
+                along_axes.to_array().map(bits)
+            );
+        }
+        // The projections' sum, as the update read it before: the same mean strain rate to
+        // within rounding.
+        let e1 = grain.principal_direction();
+        let e2 = e1.perp();
+        let current_area = grain.ellipse_area() - load.lost_area;
+        let external = 0.5 * (load.moment + load.moment.transpose()) * (1.0 / current_area);
+        let projected = e1.dot(external * e1) + e2.dot(external * e2);
+        let trace = external.x_axis.x + external.y_axis.y;
+        assert!(
+            (projected - trace).abs() < 1e-15 * trace.abs(),
+            "{projected} {trace}"
         );
     }
 

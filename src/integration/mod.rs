@@ -35,7 +35,7 @@ pub use sweep::{SweepPlan, SweepTally, sweep_plan_of};
 
 use crate::boundary::periodic::{CellMotion, PeriodicBoundary, PeriodicCell, symmetric_dyad};
 use crate::boundary::walls::{Wall, box_corners, box_corners_after};
-use crate::geometry::affine::{AffineState, Mat2, map_and_velocity_gradient};
+use crate::geometry::affine::{AffineState, Mat2, map_and_velocity_gradient, principal_direction};
 use crate::geometry::angle;
 use crate::geometry::broadphase::{NeighborList, clear_with_room};
 use crate::geometry::contour::QUARTER_TURN;
@@ -124,8 +124,26 @@ impl Frame {
     /// The frame of a grain at its current state.
     #[inline]
     pub fn of_grain(grain: &Grain, density: f64) -> Self {
-        let (shape, velocity_gradient) = grain.shape_and_velocity_gradient();
-        Self::full(grain, density, shape.map, velocity_gradient)
+        Self::of_grain_and_direction(grain, density).0
+    }
+
+    /// [`Frame::of_grain`] and the grain's [principal direction](Grain::principal_direction),
+    /// from the same sines and cosines.
+    #[inline]
+    pub fn of_grain_and_direction(grain: &Grain, density: f64) -> (Self, DVec2) {
+        let state = grain.affine_state();
+        let (map, gradient) = map_and_velocity_gradient(&state);
+        let shape = GrainShape::from_map(
+            grain.center,
+            map.to_glam(),
+            grain.radius,
+            grain.eps1,
+            grain.eps2,
+        );
+        (
+            Self::full(grain, density, shape.map, gradient.to_glam()),
+            DVec2::from(principal_direction(&state)),
+        )
     }
 
     /// The frame of a grain that is not a circle, given its map and velocity gradient.
@@ -143,14 +161,16 @@ impl Frame {
         }
     }
 
-    /// Writes [`Frame::of_grain`] of the grains `block` into `frames` (the same indices), the
-    /// sines and cosines of their angles, their maps and velocity gradients computed side by
-    /// side in lanes (with AVX where the processor has it, chosen at run time): the same bits,
-    /// grain by grain. These were some 400 instructions a grain-step at the full level, and
-    /// `libm`'s branches on the angles of grains that have turned (issue #16).
+    /// Writes [`Frame::of_grain_and_direction`] of the grains `block` into `frames` and
+    /// `directions` (the same indices), the sines and cosines of their angles, their maps,
+    /// velocity gradients and principal directions computed side by side in lanes (with AVX
+    /// where the processor has it, chosen at run time): the same bits, grain by grain. These
+    /// were some 400 instructions a grain-step at the full level, and `libm`'s branches on the
+    /// angles of grains that have turned (issue #16).
     #[inline]
     pub fn write_full_block(
         frames: &mut [Frame],
+        directions: &mut [DVec2],
         grains: &[Grain],
         block: [usize; FRAME_LANES],
         density: f64,
@@ -162,9 +182,10 @@ impl Frame {
             (angles.theta.0[l], angles.alpha.0[l]) = (grain.theta, grain.alpha);
             states.set_lane(l, &grain.affine_state_without_angles());
         }
-        let (maps, gradients) = affine_lanes_dispatch(&angles, &states);
+        let (maps, gradients, principal) = affine_lanes_dispatch(&angles, &states);
         for (l, &k) in block.iter().enumerate() {
             frames[k] = Frame::full(&grains[k], density, maps.lane(l), gradients.lane(l));
+            directions[k] = DVec2::new(principal[0].0[l], principal[1].0[l]);
         }
     }
 }
@@ -173,7 +194,8 @@ impl Frame {
 pub const FRAME_LANES: usize = 4;
 
 type FrameLanes = Lanes<FRAME_LANES>;
-type AffineLanes = (Mat2<FrameLanes>, Mat2<FrameLanes>);
+/// A block's maps, velocity gradients and principal directions.
+type AffineLanes = (Mat2<FrameLanes>, Mat2<FrameLanes>, [FrameLanes; 2]);
 
 /// The angles theta and alpha of a block's grains.
 #[derive(Default)]
@@ -188,13 +210,15 @@ struct BlockAngles {
 fn affine_lanes(angles: &BlockAngles, states: &AffineState<FrameLanes>) -> AffineLanes {
     let (sin_theta, cos_theta) = angle::sin_cos_lanes(&angles.theta);
     let (sin_alpha, cos_alpha) = angle::sin_cos_lanes(&angles.alpha);
-    map_and_velocity_gradient(&AffineState {
+    let state = AffineState {
         sin_theta,
         cos_theta,
         sin_alpha,
         cos_alpha,
         ..*states
-    })
+    };
+    let (map, gradient) = map_and_velocity_gradient(&state);
+    (map, gradient, principal_direction(&state))
 }
 
 /// [`affine_lanes`], with AVX where the processor has it. Out of line, so that the lanes are
@@ -220,13 +244,15 @@ fn affine_lanes_avx(angles: &BlockAngles, states: &AffineState<FrameLanes>) -> A
 
 impl Frame {
     /// Writes the frame of `grain` at `level`: a circle where the grain is one (see
-    /// [`Frame::circle`]), else its full frame.
+    /// [`Frame::circle`]), else its full frame, and then its principal direction to
+    /// `direction` (left as it was beside a circle, which is never at the full level, the one
+    /// level that reads it).
     #[inline]
-    pub fn write(&mut self, grain: &Grain, level: ModelLevel, density: f64) {
+    pub fn write(&mut self, direction: &mut DVec2, grain: &Grain, level: ModelLevel, density: f64) {
         if Self::is_circle(grain, level) {
             self.write_circle(grain, level, density);
         } else {
-            *self = Frame::of_grain(grain, density);
+            (*self, *direction) = Frame::of_grain_and_direction(grain, density);
         }
     }
 
@@ -659,6 +685,10 @@ pub struct World {
     /// Each grain's frame, with the broad phase's copies of its centre and reach in `centers`
     /// and `reach`.
     frames: Vec<Frame>,
+    /// Each grain's principal direction (see [`Grain::principal_direction`]), written with its
+    /// frame from the frame's own sines and cosines, for the next step's stresses; stale
+    /// beside a circle, which is never at the full level (the one level that reads it).
+    directions: Vec<DVec2>,
     /// Whether `frames`, `centers` and `reach` describe the grains as they are now: the grain
     /// pass writes each grain's next frame right after its update, so that the next step
     /// need not read every grain again in a pass of its own (issue #16: that pass was a tenth
@@ -795,6 +825,7 @@ impl World {
             step: 0,
             neighbors: NeighborList::new(skin),
             frames: Vec::with_capacity(n),
+            directions: Vec::with_capacity(n),
             frames_current: false,
             circle_frames: 0,
             pair_state: Vec::new(),
@@ -1000,6 +1031,7 @@ impl World {
         let n = self.grains.len();
         if !self.frames_current || self.frames.len() != n {
             self.frames.resize(n, Frame::default());
+            self.directions.resize(n, DVec2::ZERO);
             self.centers.resize(n, DVec2::ZERO);
             self.reach.resize(n, 0.0);
             // One parallel pass writes the frames and, beside them, the compact centres and
@@ -1007,12 +1039,13 @@ impl World {
             // the second thread could not share.
             self.frames
                 .par_iter_mut()
+                .zip(self.directions.par_iter_mut())
                 .zip(self.centers.par_iter_mut())
                 .zip(self.reach.par_iter_mut())
                 .zip(self.grains.par_iter().zip(self.levels.par_iter()))
                 .with_min_len(GRAIN_CHUNK)
-                .for_each(|(((frame, center), reach), (g, level))| {
-                    frame.write(g, level.level, density);
+                .for_each(|((((frame, direction), center), reach), (g, level))| {
+                    frame.write(direction, g, level.level, density);
                     *center = frame.center;
                     *reach = frame.bounding_radius;
                 });
@@ -1150,6 +1183,7 @@ impl World {
             levels,
             wall_history,
             frames,
+            directions,
             centers,
             reach,
             wraps,
@@ -1179,6 +1213,7 @@ impl World {
                 levels,
                 wall_histories: wall_history,
                 frames,
+                directions,
                 centers,
                 reach,
                 wraps,
@@ -2010,6 +2045,21 @@ mod tests {
                 );
                 let frames = |w: &World| w.frames.iter().map(frame_bits).collect::<Vec<_>>();
                 same("frames", &at, &frames(&by_block), &frames(&by_grain));
+                // The directions beside the frames that are not circles.
+                let directions = |w: &World| {
+                    w.frames
+                        .iter()
+                        .zip(&w.directions)
+                        .filter(|(frame, _)| !frame.circle())
+                        .map(|(_, d)| d.to_array().map(f64::to_bits))
+                        .collect::<Vec<_>>()
+                };
+                same(
+                    "directions",
+                    &at,
+                    &directions(&by_block),
+                    &directions(&by_grain),
+                );
                 same("centres", &at, &by_block.centers, &by_grain.centers);
                 same("reaches", &at, &by_block.reach, &by_grain.reach);
                 same("levels", &at, by_block.levels(), by_grain.levels());
@@ -2061,10 +2111,20 @@ mod tests {
         let density = world.params.material.density;
         for (g, (grain, level)) in world.grains.iter().zip(&world.levels).enumerate() {
             let mut expected = Frame::default();
-            expected.write(grain, level.level, density);
+            let mut direction = DVec2::NAN;
+            expected.write(&mut direction, grain, level.level, density);
             let frame = &world.frames[g];
             if frame_bits(frame) != frame_bits(&expected) {
                 return Err(format!("grain {g}: {frame:?} against {expected:?}"));
+            }
+            // Beside a frame that is not a circle, the grain's principal direction.
+            let found = world.directions[g];
+            if !frame.circle()
+                && found.to_array().map(f64::to_bits) != direction.to_array().map(f64::to_bits)
+            {
+                return Err(format!(
+                    "grain {g}: direction {found:?} against {direction:?}"
+                ));
             }
             if world.centers[g] != frame.center || world.reach[g] != frame.bounding_radius {
                 return Err(format!("grain {g}: broad-phase copies differ"));
