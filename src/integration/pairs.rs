@@ -56,6 +56,9 @@ const PREFETCH_AHEAD: usize = 8;
 /// ahead stepped 1.10 times as fast as 8 on one thread, 16 and 64 ahead 0.98 times as fast as
 /// 32).
 const CIRCLE_PREFETCH_AHEAD: usize = 32;
+/// How many pairs ahead the pair pass asks for the rows of polygon pairs, where it records
+/// blocks of four at once.
+const ROWS_PREFETCH_AHEAD: usize = 32;
 
 /// What the pair pass reads, shared by every chunk.
 pub(super) struct PairPass<'a> {
@@ -296,6 +299,12 @@ impl<'a> PairPass<'a> {
                     && polygons.holds_block_from(0, k)
                 {
                     polygons.record_block(0, k, states, lengths, actives, records);
+                    self.prefetch_rows(
+                        p + ROWS_PREFETCH_AHEAD,
+                        k + ROWS_PREFETCH_AHEAD,
+                        states,
+                        records,
+                    );
                     k += BLOCK;
                     continue;
                 }
@@ -361,6 +370,22 @@ impl<'a> PairPass<'a> {
             for line in 0..LINES {
                 prefetch_address(frame.wrapping_add(64 * line));
             }
+        }
+    }
+
+    /// Asks for the rows of the block of polygon pairs from pair `p` (the chunk's `k`): the
+    /// list's line, the states' and the records' (issue #16: where blocks of four are
+    /// recorded at once, a block's turn is short, and its rows' loads stalled the window's
+    /// tests of the hints).
+    #[inline(always)]
+    fn prefetch_rows(&self, p: usize, k: usize, states: &[PairState], records: &[PairContact]) {
+        prefetch_address(self.pairs.as_ptr().wrapping_add(p).cast());
+        let states_ahead = states.as_ptr().wrapping_add(k).cast::<u8>();
+        prefetch_address(states_ahead);
+        prefetch_address(states_ahead.wrapping_add(64));
+        let records_ahead = records.as_ptr().wrapping_add(k);
+        for lane in 0..BLOCK {
+            prefetch_address(records_ahead.wrapping_add(lane).cast());
         }
     }
 
