@@ -170,7 +170,15 @@ impl Grain {
     /// [`Grain::shape`] and [`Grain::velocity_gradient`] together: the sines and cosines of
     /// theta and alpha are computed once (they were a tenth of the cost of a dense step).
     pub fn shape_and_velocity_gradient(&self) -> (GrainShape, DMat2) {
-        let (map, gradient) = map_and_velocity_gradient(&self.affine_state());
+        let (shape, gradient, _) = self.shape_velocity_gradient_and_direction();
+        (shape, gradient)
+    }
+
+    /// [`Grain::shape_and_velocity_gradient`] and [`Grain::principal_direction`], from the
+    /// same sines and cosines.
+    pub fn shape_velocity_gradient_and_direction(&self) -> (GrainShape, DMat2, DVec2) {
+        let state = self.affine_state();
+        let (map, gradient) = map_and_velocity_gradient(&state);
         let shape = GrainShape::from_map(
             self.center,
             map.to_glam(),
@@ -178,7 +186,11 @@ impl Grain {
             self.eps1,
             self.eps2,
         );
-        (shape, gradient.to_glam())
+        (
+            shape,
+            gradient.to_glam(),
+            DVec2::from(principal_direction(&state)),
+        )
     }
 
     /// What [`map_and_velocity_gradient`] needs of this grain: the sines and cosines of theta

@@ -1717,8 +1717,9 @@ mod tests {
                 along_axes.to_array().map(bits)
             );
         }
-        // The projections' sum, as the update read it before: the same mean strain rate to
-        // within rounding.
+        // The size of the change of rounding (the figure its commit states): the sum of the
+        // projections on the grain's axes, which the update read before, is the trace to
+        // 1e-15 relative. Arithmetic only: the update itself is tested above.
         let e1 = grain.principal_direction();
         let e2 = e1.perp();
         let current_area = grain.ellipse_area() - load.lost_area;

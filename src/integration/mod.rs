@@ -131,19 +131,8 @@ impl Frame {
     /// from the same sines and cosines.
     #[inline]
     pub fn of_grain_and_direction(grain: &Grain, density: f64) -> (Self, DVec2) {
-        let state = grain.affine_state();
-        let (map, gradient) = map_and_velocity_gradient(&state);
-        let shape = GrainShape::from_map(
-            grain.center,
-            map.to_glam(),
-            grain.radius,
-            grain.eps1,
-            grain.eps2,
-        );
-        (
-            Self::full(grain, density, shape.map, gradient.to_glam()),
-            DVec2::from(principal_direction(&state)),
-        )
+        let (shape, gradient, direction) = grain.shape_velocity_gradient_and_direction();
+        (Self::full(grain, density, shape.map, gradient), direction)
     }
 
     /// The frame of a grain that is not a circle, given its map and velocity gradient.
