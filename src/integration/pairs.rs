@@ -847,7 +847,10 @@ impl<'a> PolygonsAhead<'a> {
         self.pairs[lane] == k
             && self.pairs[lane + BLOCK - 1] == k + BLOCK - 1
             && self.results[block].all_on_path()
-            && (0..BLOCK).all(|l| SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l]))
+            // Every lane tested, without a branch each: compared in lanes.
+            && (0..BLOCK).fold(true, |all, l| {
+                all & SecantLaw::in_domain(forces.denominator.0[l], forces.floor.0[l])
+            })
     }
 
     /// Writes the states, flags and records of the chunk's pairs `k..k + BLOCK`, the block
