@@ -84,6 +84,57 @@ pub struct LanePair<'a> {
     pub hint: PairHint,
 }
 
+/// Where a call of [`grain_grain_blocks`] reads its pairs, lane by lane: each pair's two
+/// shapes as a [`LaneShape`] holds them (its centre and bounding radius, then its map, four
+/// `f64`s each), the shift of j's centre to its image and the pair's hint. An array of
+/// [`LanePair`]s is one; the pair pass reads its frames where they lie through another, so
+/// that filling a call's lanes writes only each pair's grains and hint (issue #16).
+///
+/// # Safety
+/// For every lane below [`PAIRS`], the pointers returned are valid for reads while the source
+/// is borrowed: `shape`'s of four `f64`s each, `j_shift`'s of two, `hint`'s of a [`PairHint`].
+pub unsafe trait LanePairs {
+    /// Where lane `lane`'s grain i (`second` false) or j has its centre and bounding radius,
+    /// and its map.
+    ///
+    /// # Safety
+    /// `lane` is below [`PAIRS`].
+    unsafe fn shape(&self, lane: usize, second: bool) -> [*const f64; 2];
+    /// Where the lane's shift of j lies.
+    ///
+    /// # Safety
+    /// `lane` is below [`PAIRS`].
+    unsafe fn j_shift(&self, lane: usize) -> *const f64;
+    /// Where the lane's hint lies.
+    ///
+    /// # Safety
+    /// `lane` is below [`PAIRS`].
+    unsafe fn hint(&self, lane: usize) -> *const PairHint;
+}
+
+// SAFETY: each lane's pointers are its `LanePair`'s fields, borrowed with the array.
+unsafe impl LanePairs for [LanePair<'_>; PAIRS] {
+    #[inline(always)]
+    unsafe fn shape(&self, lane: usize, second: bool) -> [*const f64; 2] {
+        // SAFETY: the caller's.
+        let pair = unsafe { self.get_unchecked(lane) };
+        let shape = if second { &pair.j } else { &pair.i };
+        [shape.center_and_radius.as_ptr(), shape.map.as_ptr()]
+    }
+
+    #[inline(always)]
+    unsafe fn j_shift(&self, lane: usize) -> *const f64 {
+        // SAFETY: the caller's. A shift is two f64s (`DVec2` is `repr(C)`).
+        (unsafe { &self.get_unchecked(lane).j_shift } as *const DVec2).cast()
+    }
+
+    #[inline(always)]
+    unsafe fn hint(&self, lane: usize) -> *const PairHint {
+        // SAFETY: the caller's.
+        unsafe { &self.get_unchecked(lane).hint }
+    }
+}
+
 /// What a lane found: the pair's contact and its hint for next step, or `None` where the pair
 /// leaves the common path (then [`grain_grain_hinted`] decides, from the old hint).
 pub type LaneContact = Option<(ContactGeometry, PairHint)>;
@@ -217,10 +268,10 @@ impl BlockKernel {
 /// moved by the pairs' `j_shift` (a periodic cell's images). Out of line, so that the lanes
 /// stay in vector registers.
 #[inline(never)]
-pub fn grain_grain_blocks(
+pub fn grain_grain_blocks<P: LanePairs>(
     kernel: BlockKernel,
     table: &ContourTable,
-    pairs: &[LanePair<'_>; PAIRS],
+    pairs: &P,
     shifted: bool,
     filled: usize,
     contacts: &mut [BlockContacts; BLOCKS],

@@ -33,7 +33,7 @@ use crate::geometry::circle::{
 };
 use crate::geometry::intersection::ContactGeometry;
 use crate::geometry::intersection_lanes::{
-    BLOCK, BLOCKS, BlockContacts, BlockKernel, LaneContact, LanePair, PAIRS, grain_grain_blocks,
+    BLOCK, BLOCKS, BlockContacts, BlockKernel, LaneContact, LanePairs, PAIRS, grain_grain_blocks,
 };
 use crate::geometry::{ContourTable, Contours, GrainShape, Overlap, PairHint};
 use crate::lanes::{Lanes, Real};
@@ -185,7 +185,7 @@ impl<'a> PairPass<'a> {
             }
             return sums;
         }
-        let polygons = PolygonsAhead::new(self.contours, self.every_frame_a_circle);
+        let polygons = PolygonsAhead::new(self.contours, self.frames, self.every_frame_a_circle);
         // A world of circles (the rigid level's) takes a loop without the polygon blocks' test.
         if polygons.table.is_some() {
             self.chunk_in_order::<FRICTIONAL, true>(
@@ -337,28 +337,6 @@ impl<'a> PairPass<'a> {
                 let [i, j] = self.pairs[p];
                 !self.frames.row(i as usize).circle() && !self.frames.row(j as usize).circle()
             })
-    }
-
-    /// Pair `p`'s two frames.
-    #[inline(always)]
-    fn frames_of(&self, p: usize) -> [&'a Frame; 2] {
-        let frames = self.frames;
-        self.pairs[p].map(|g| frames.row(g as usize))
-    }
-
-    /// Pair `p`'s two shapes (of its frames `ends`), read in place, the shift to the image of
-    /// the second that meets the first, and its hint.
-    #[inline(always)]
-    fn lane_pair(&self, p: usize, ends: [&'a Frame; 2], hint: PairHint) -> LanePair<'a> {
-        LanePair {
-            i: ends[0].lane_shape(),
-            j: ends[1].lane_shape(),
-            j_shift: match &self.periodic {
-                Some((cell, _)) => cell.image_shift(self.images[p]),
-                None => DVec2::ZERO,
-            },
-            hint,
-        }
     }
 
     /// Asks for the first `LINES` cache lines of the frame of the second grain of the pair
@@ -788,10 +766,9 @@ struct PolygonsAhead<'a> {
     table: Option<(&'a ContourTable, BlockKernel)>,
     /// The blocks' pairs (chunk indices, increasing) and their results; `taken` of them used.
     pairs: [usize; PAIRS],
-    /// The blocks' shapes and hints, kept from turn to turn (only their filling changes), and
-    /// their pairs' frames.
-    block: [LanePair<'a>; PAIRS],
-    ends: [[&'a Frame; 2]; PAIRS],
+    /// The blocks' pairs as the kernel reads them, kept from turn to turn (only their
+    /// filling changes).
+    lanes: AheadLanes<'a>,
     results: [BlockContacts; BLOCKS],
     /// The blocks' pairs as their normal forces read them, and those forces.
     input: [PolygonPairs; BLOCKS],
@@ -803,17 +780,28 @@ struct PolygonsAhead<'a> {
 impl<'a> PolygonsAhead<'a> {
     /// Blocks of `contours`' polygons, where the processor runs them and some frame is not a
     /// circle.
-    fn new(contours: &'a Contours, every_frame_a_circle: bool) -> Self {
+    fn new(
+        contours: &'a Contours,
+        frames: SharedRows<'a, Frame>,
+        every_frame_a_circle: bool,
+    ) -> Self {
         Self {
+            // Without frames there is no pair (and `AheadLanes` needs a row 0).
             table: match (contours, block_kernel()) {
-                (Contours::Polygon(table), Some(kernel)) if !every_frame_a_circle => {
+                (Contours::Polygon(table), Some(kernel))
+                    if !every_frame_a_circle && frames.len() > 0 =>
+                {
                     Some((table, kernel))
                 }
                 _ => None,
             },
             pairs: [0; PAIRS],
-            block: [LanePair::default(); PAIRS],
-            ends: [[&SPARE_FRAME; 2]; PAIRS],
+            lanes: AheadLanes {
+                frames,
+                grains: [[0; 2]; PAIRS],
+                hints: [PairHint::default(); PAIRS],
+                shifts: [DVec2::ZERO; PAIRS],
+            },
             results: [BlockContacts::default(); BLOCKS],
             input: [PolygonPairs::default(); BLOCKS],
             forces: [PolygonPairForces::default(); BLOCKS],
@@ -957,18 +945,28 @@ impl<'a> PolygonsAhead<'a> {
         if !pass.on_polygon_path(first_pair + k, &states[k].hint) {
             return None;
         }
-        let (block, ends) = (&mut self.block, &mut self.ends);
-        ends[0] = pass.frames_of(first_pair + k);
-        block[0] = pass.lane_pair(first_pair + k, ends[0], states[k].hint);
+        // Read once, not at every pair: the stores below might reach it, for all the
+        // compiler knows.
+        let rows = self.lanes.frames.len();
+        // A pair's grains, checked to be rows of the frames (see `AheadLanes::grains`).
+        let checked = |grains: [u32; 2]| {
+            assert!((grains[0] as usize) < rows && (grains[1] as usize) < rows);
+            grains
+        };
+        let lanes = &mut self.lanes;
+        lanes.grains[0] = checked(pass.pairs[first_pair + k]);
+        lanes.hints[0] = states[k].hint;
         self.pairs[0] = k;
         let mut filled = 1;
-        let window = &states[k + 1..(k + POLYGON_WINDOW).min(states.len())];
-        for (ahead, state) in (k + 1..).zip(window) {
+        let window = k + 1..(k + POLYGON_WINDOW).min(states.len());
+        // The window's pairs beside their states (one bounds check, not one a pair).
+        let window_pairs = &pass.pairs[first_pair + window.start..first_pair + window.end];
+        for ((ahead, state), &grains) in window.clone().zip(&states[window]).zip(window_pairs) {
             let hint = state.hint;
             let p = first_pair + ahead;
             if pass.on_polygon_path(p, &hint) {
-                ends[filled] = pass.frames_of(p);
-                block[filled] = pass.lane_pair(p, ends[filled], hint);
+                lanes.grains[filled] = checked(grains);
+                lanes.hints[filled] = hint;
                 self.pairs[filled] = ahead;
                 filled += 1;
                 if filled == PAIRS {
@@ -978,20 +976,30 @@ impl<'a> PolygonsAhead<'a> {
         }
         // Spare lanes repeat the first pair; their results are not used.
         for lane in filled..PAIRS {
-            block[lane] = block[0];
-            ends[lane] = ends[0];
+            lanes.grains[lane] = lanes.grains[0];
+            lanes.hints[lane] = lanes.hints[0];
+        }
+        if let Some((cell, _)) = &pass.periodic {
+            for (lane, shift) in lanes.shifts.iter_mut().enumerate() {
+                let ahead = self.pairs[if lane < filled { lane } else { 0 }];
+                *shift = cell.image_shift(pass.images[first_pair + ahead]);
+            }
         }
         let shifted = pass.periodic.is_some();
-        grain_grain_blocks(kernel, table, block, shifted, filled, &mut self.results);
+        grain_grain_blocks(
+            kernel,
+            table,
+            &self.lanes,
+            shifted,
+            filled,
+            &mut self.results,
+        );
         for b in 0..filled.div_ceil(BLOCK) {
-            let lanes = b * BLOCK..(b + 1) * BLOCK;
-            let block = block[lanes.clone()].try_into().expect("a block");
-            let ends = ends[lanes].try_into().expect("a block's frames");
             // SAFETY: a block is computed only where the processor has AVX (`table` is set
             // only there: `new`).
             #[cfg(target_arch = "x86_64")]
             unsafe {
-                self.input[b].set_pairs_avx(pass, block, ends);
+                self.input[b].set_pairs_avx(pass, &self.lanes, b);
                 polygon_pair_forces_avx(
                     &self.results[b],
                     &self.input[b],
@@ -1023,17 +1031,57 @@ fn block_kernel() -> Option<BlockKernel> {
     BlockKernel::best()
 }
 
-/// What a polygon block's lanes hold before it is first filled.
-static SPARE_FRAME: Frame = Frame {
-    center: DVec2::ZERO,
-    bounding_radius: 0.0,
-    mass: 0.0,
-    velocity: DVec2::ZERO,
-    omega: 0.0,
-    circle_dilation: super::NOT_A_CIRCLE,
-    map: DMat2::ZERO,
-    velocity_gradient: DMat2::ZERO,
-};
+/// The pairs of a call of the polygon kernel as it reads them ([`LanePairs`]): each lane's two
+/// grains, whose frames the kernel reads where they lie, and the pair's hint and the shift to
+/// its second grain's image, copied as the window is filled. A lane costs the filling 24 bytes
+/// written (and 16 more in a periodic cell) where a `LanePair` and the pair's two frame
+/// references were 80 (issue #16).
+struct AheadLanes<'a> {
+    frames: SharedRows<'a, Frame>,
+    /// Each lane's two grains: rows of `frames`, checked as they are written
+    /// (`PolygonsAhead::take`; row 0 exists before: `PolygonsAhead::new`).
+    grains: [[u32; 2]; PAIRS],
+    hints: [PairHint; PAIRS],
+    /// In a periodic cell only; zero, and not read, elsewhere.
+    shifts: [DVec2; PAIRS],
+}
+
+impl<'a> AheadLanes<'a> {
+    /// Lane `lane`'s two frames.
+    #[inline(always)]
+    fn frames_of(&self, lane: usize) -> [&'a Frame; 2] {
+        // SAFETY: every lane's grains are rows of `frames` (see `grains`).
+        self.grains[lane].map(|g| unsafe { self.frames.row_unchecked(g as usize) })
+    }
+}
+
+// SAFETY: a lane's shape is its frame's (`Frame::lane_shape`), a row of the frames (see
+// `grains`); its hint and shift are the lane's own.
+unsafe impl LanePairs for AheadLanes<'_> {
+    #[inline(always)]
+    unsafe fn shape(&self, lane: usize, second: bool) -> [*const f64; 2] {
+        // SAFETY: the lane is below `PAIRS` (the caller's), and its grain a row of `frames`
+        // (see `grains`).
+        let frame = unsafe {
+            let grains = self.grains.get_unchecked(lane);
+            self.frames.row_unchecked(grains[second as usize] as usize)
+        };
+        let shape = frame.lane_shape();
+        [shape.center_and_radius.as_ptr(), shape.map.as_ptr()]
+    }
+
+    #[inline(always)]
+    unsafe fn j_shift(&self, lane: usize) -> *const f64 {
+        // SAFETY: the caller's. A shift is two f64s (`DVec2` is `repr(C)`).
+        (unsafe { self.shifts.get_unchecked(lane) } as *const DVec2).cast()
+    }
+
+    #[inline(always)]
+    unsafe fn hint(&self, lane: usize) -> *const PairHint {
+        // SAFETY: the caller's.
+        unsafe { self.hints.get_unchecked(lane) }
+    }
+}
 
 /// The lanes of a block of polygon pairs.
 type BlockLanes = Lanes<BLOCK>;
@@ -1120,15 +1168,18 @@ struct PolygonPairs {
 }
 
 impl PolygonPairs {
-    /// The lanes set to the pairs `block` of `pass`, whose grains' frames are `ends`.
+    /// The lanes set to the pairs of `pass` in block `block` of `lanes`.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn set_pairs_avx(
-        &mut self,
-        pass: &PairPass<'_>,
-        block: &[LanePair<'_>; BLOCK],
-        ends: &[[&Frame; 2]; BLOCK],
-    ) {
+    fn set_pairs_avx(&mut self, pass: &PairPass<'_>, lanes: &AheadLanes<'_>, block: usize) {
+        let first = block * BLOCK;
+        // Not `array::from_fn`: its closure may not be inlined here (see `set_avx`).
+        let ends = [
+            lanes.frames_of(first),
+            lanes.frames_of(first + 1),
+            lanes.frames_of(first + 2),
+            lanes.frames_of(first + 3),
+        ];
         self.first
             .set_avx([ends[0][0], ends[1][0], ends[2][0], ends[3][0]]);
         self.second
@@ -1136,9 +1187,10 @@ impl PolygonPairs {
         let Some((_, velocity_gradient)) = &pass.periodic else {
             return;
         };
-        // The block holds each pair's image shift already.
-        for (lane, (pair, [first, second])) in block.iter().zip(ends).enumerate() {
-            let end = end_at_image(first, second, pair.j_shift, velocity_gradient);
+        // The lanes hold each pair's image shift already.
+        for (lane, [first_end, second_end]) in ends.into_iter().enumerate() {
+            let shift = lanes.shifts[first + lane];
+            let end = end_at_image(first_end, second_end, shift, velocity_gradient);
             let values = [
                 (&mut self.second.center, end.center),
                 (&mut self.branch, end.branch),

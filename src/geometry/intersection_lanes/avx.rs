@@ -5,7 +5,7 @@
 use super::kernel::{
     Bits, V2, Wide, index_operations, lane_arithmetic, lane_comparisons, selection_ops,
 };
-use super::{BLOCK, BLOCKS, BlockContacts, LanePair, PAIRS};
+use super::{BLOCK, BLOCKS, BlockContacts, LanePairs, PAIRS};
 use crate::geometry::intersection::PairHint;
 use std::arch::x86_64::*;
 
@@ -88,12 +88,13 @@ pub(super) unsafe fn transpose_i(rows: [__m128i; 4]) -> [__m128i; 4] {
     }
 }
 
-/// Four pairs' hints (`pairs[..4]`) as lanes: first.lo, first.hi, second.lo, second.hi.
+/// Four pairs' hints (lane `l`'s at `hint(l)`) as lanes: first.lo, first.hi, second.lo,
+/// second.hi.
 #[inline(always)]
-pub(super) unsafe fn hints4(pairs: &[LanePair<'_>]) -> [__m128i; 4] {
+pub(super) unsafe fn hints4(hint: impl Fn(usize) -> *const PairHint) -> [__m128i; 4] {
     unsafe {
         // SAFETY: a `PairHint` is four i32s (`repr(C)`).
-        let row = |l: usize| (&pairs.get_unchecked(l).hint as *const PairHint).cast::<__m128i>();
+        let row = |l: usize| hint(l).cast::<__m128i>();
         transpose_i([
             _mm_loadu_si128(row(0)),
             _mm_loadu_si128(row(1)),
@@ -266,8 +267,8 @@ unsafe impl Wide for Avx {
     }
 
     #[inline(always)]
-    unsafe fn hints(pairs: &[LanePair<'_>]) -> [__m128i; 4] {
-        unsafe { hints4(pairs) }
+    unsafe fn hints(hint: impl Fn(usize) -> *const PairHint) -> [__m128i; 4] {
+        unsafe { hints4(hint) }
     }
     #[inline(always)]
     unsafe fn store_hints(rows: [__m128i; 4], out: &mut [BlockContacts]) {
@@ -283,20 +284,24 @@ unsafe impl Wide for Avx {
 /// # Safety
 /// The processor has AVX.
 #[target_feature(enable = "avx")]
-pub(super) unsafe fn grain_grain_blocks(
+pub(super) unsafe fn grain_grain_blocks<P: LanePairs>(
     table: &crate::geometry::contour::ContourTable,
-    pairs: &[LanePair<'_>; PAIRS],
+    pairs: &P,
     shifted: bool,
     filled: usize,
     out: &mut [BlockContacts; BLOCKS],
 ) {
-    for (pairs, out) in pairs
-        .chunks_exact(BLOCK)
-        .zip(out.chunks_exact_mut(1))
+    // Block b's lanes are the source's 4b..4b + 4, below PAIRS.
+    const { assert!(PAIRS == BLOCKS * BLOCK) };
+    for (b, out) in out
+        .chunks_exact_mut(1)
+        .enumerate()
         .take(filled.div_ceil(BLOCK))
     {
-        // SAFETY: the caller's processor has AVX, and each block is four pairs with one
-        // block of contacts.
-        unsafe { super::kernel::grain_grain_lanes::<Avx>(table, pairs, shifted, out) };
+        // SAFETY: the caller's processor has AVX, and each block is four of the source's
+        // lanes with one block of contacts.
+        unsafe {
+            super::kernel::grain_grain_lanes::<Avx, P>(table, pairs, b * BLOCK, shifted, out)
+        };
     }
 }

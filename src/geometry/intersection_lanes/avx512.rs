@@ -7,7 +7,8 @@ use super::avx::{hints4, store_hints4};
 use super::kernel::{
     Bits, V2, Wide, index_operations, lane_arithmetic, lane_comparisons, selection_ops,
 };
-use super::{BLOCK, BLOCKS, BlockContacts, LanePair};
+use super::{BLOCK, BLOCKS, BlockContacts, LanePairs};
+use crate::geometry::intersection::PairHint;
 use std::arch::x86_64::*;
 
 /// Eight `f64` lanes.
@@ -279,10 +280,10 @@ unsafe impl Wide for Avx512 {
     }
 
     #[inline(always)]
-    unsafe fn hints(pairs: &[LanePair<'_>]) -> [__m256i; 4] {
+    unsafe fn hints(hint: impl Fn(usize) -> *const PairHint) -> [__m256i; 4] {
         unsafe {
-            let low = hints4(pairs.get_unchecked(..BLOCK));
-            let high = hints4(pairs.get_unchecked(BLOCK..));
+            let low = hints4(&hint);
+            let high = hints4(|l| hint(BLOCK + l));
             [
                 _mm256_set_m128i(high[0], low[0]),
                 _mm256_set_m128i(high[1], low[1]),
@@ -323,11 +324,11 @@ pub(super) fn available() -> bool {
 /// # Safety
 /// The processor has them.
 #[target_feature(enable = "avx512f,avx512vl,avx2,avx")]
-pub(super) unsafe fn grain_grain_blocks(
+pub(super) unsafe fn grain_grain_blocks<P: LanePairs>(
     table: &crate::geometry::contour::ContourTable,
-    pairs: &[LanePair<'_>; 2 * BLOCK],
+    pairs: &P,
     shifted: bool,
     out: &mut [BlockContacts; BLOCKS],
 ) {
-    unsafe { super::kernel::grain_grain_lanes::<Avx512>(table, pairs, shifted, out) }
+    unsafe { super::kernel::grain_grain_lanes::<Avx512, P>(table, pairs, 0, shifted, out) }
 }

@@ -3,9 +3,9 @@
 //! ([`super::avx512`]). Every lane computes with the operations of the
 //! one-pair path, in its order, whichever the registers: the kernels give the same bits.
 
-use super::{BLOCK, BlockContacts, LanePair};
+use super::{BLOCK, BlockContacts, LanePairs};
 use crate::geometry::contour::ContourTable;
-use crate::geometry::intersection::ChainHint;
+use crate::geometry::intersection::{ChainHint, PairHint};
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 
 /// Lanes as bits: bit `l` for lane `l`.
@@ -101,8 +101,9 @@ pub(super) unsafe trait Wide:
     /// Lane `l` as an `isize`.
     unsafe fn index(k: Self::I, l: usize) -> isize;
 
-    /// The pairs' hints (`pairs[..LANES]`) as lanes: first.lo, first.hi, second.lo, second.hi.
-    unsafe fn hints(pairs: &[LanePair<'_>]) -> [Self::I; 4];
+    /// The pairs' hints (lane `l`'s at `hint(l)`) as lanes: first.lo, first.hi, second.lo,
+    /// second.hi.
+    unsafe fn hints(hint: impl Fn(usize) -> *const PairHint) -> [Self::I; 4];
     /// Lanes of hints (first.lo, first.hi, second.lo, second.hi) stored to the blocks' hints.
     unsafe fn store_hints(rows: [Self::I; 4], out: &mut [BlockContacts]);
 }
@@ -592,16 +593,17 @@ unsafe fn cap_area_and_depth<W: Wide>(
     }
 }
 
-/// A grain's centre, map and bounding radius, side i or j of each pair.
+/// A grain's centre, map and bounding radius, side i or j of each pair (lane `l` the source's
+/// lane `first + l`).
 #[inline(always)]
-unsafe fn shapes<W: Wide>(pairs: &[LanePair<'_>], second: bool) -> (V2<W>, M2<W>, W) {
+unsafe fn shapes<W: Wide, P: LanePairs>(
+    pairs: &P,
+    first: usize,
+    second: bool,
+) -> (V2<W>, M2<W>, W) {
     unsafe {
-        let side = |l: usize| {
-            let pair = pairs.get_unchecked(l);
-            if second { pair.j } else { pair.i }
-        };
-        let [center, radius] = W::load_pairs(|l| side(l).center_and_radius.as_ptr());
-        let [x_axis, y_axis] = W::load_pairs(|l| side(l).map.as_ptr());
+        let [center, radius] = W::load_pairs(|l| pairs.shape(first + l, second)[0]);
+        let [x_axis, y_axis] = W::load_pairs(|l| pairs.shape(first + l, second)[1]);
         (
             center,
             M2 {
@@ -615,20 +617,22 @@ unsafe fn shapes<W: Wide>(pairs: &[LanePair<'_>], second: bool) -> (V2<W>, M2<W>
     }
 }
 
-/// The kernel of [`super::grain_grain_blocks`] over `W`'s lanes: the pairs `pairs[..LANES]`,
-/// their contacts written to `out[..LANES / BLOCK]`, block `b` holding lanes `4b..4b + 4`.
+/// The kernel of [`super::grain_grain_blocks`] over `W`'s lanes: the source's pairs
+/// `first..first + LANES`, their contacts written to `out[..LANES / BLOCK]`, block `b` holding
+/// lanes `4b..4b + 4`.
 ///
 /// # Safety
-/// `pairs` holds `W::LANES` pairs and `out` `W::LANES / BLOCK` blocks, and the caller is
-/// compiled for `W`'s instructions, which the processor has.
+/// `first + W::LANES` is at most [`super::PAIRS`], `out` holds `W::LANES / BLOCK` blocks, and
+/// the caller is compiled for `W`'s instructions, which the processor has.
 #[inline(always)]
-pub(super) unsafe fn grain_grain_lanes<W: Wide>(
+pub(super) unsafe fn grain_grain_lanes<W: Wide, P: LanePairs>(
     table: &ContourTable,
-    pairs: &[LanePair<'_>],
+    pairs: &P,
+    first: usize,
     shifted: bool,
     out: &mut [BlockContacts],
 ) {
-    debug_assert!(pairs.len() == W::LANES && out.len() == W::LANES / BLOCK);
+    debug_assert!(first + W::LANES <= super::PAIRS && out.len() == W::LANES / BLOCK);
     unsafe {
         let n = table.nodes as isize;
         let half = n / 2;
@@ -636,7 +640,7 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
         // Last step's chain of i inside j, unwrapped, and the guesses of j's edges the
         // crossings lie on: p_lo on j's edge (hi, hi + 1) of last step's chain of j, p_hi on
         // (lo - 1, lo).
-        let [first_lo, first_hi, second_lo, second_hi] = W::hints(pairs);
+        let [first_lo, first_hi, second_lo, second_hi] = W::hints(|l| pairs.hint(first + l));
         let chain_hi = W::add_i(
             first_hi,
             W::where_i(W::greater_i(first_lo, first_hi), W::splat_i(turn)),
@@ -655,16 +659,10 @@ pub(super) unsafe fn grain_grain_lanes<W: Wide>(
             W::sub_i(chain_hi, first_lo),
         ));
 
-        let (center_i, map_i, reach_i) = shapes::<W>(pairs, false);
-        let (mut center_j, map_j, reach_j) = shapes::<W>(pairs, true);
+        let (center_i, map_i, reach_i) = shapes::<W, P>(pairs, first, false);
+        let (mut center_j, map_j, reach_j) = shapes::<W, P>(pairs, first, true);
         if shifted {
-            // A shift is two f64s (`DVec2` is `repr(C)`).
-            center_j = add(
-                center_j,
-                W::load_points(|l| {
-                    (&pairs.get_unchecked(l).j_shift as *const glam::DVec2).cast::<f64>()
-                }),
-            );
+            center_j = add(center_j, W::load_points(|l| pairs.j_shift(first + l)));
         }
         // Lanes on the path so far; a lane that leaves it computes on with safe indices. The
         // ring is read without bounds checks (`ring4`), so every node index formed here lies
