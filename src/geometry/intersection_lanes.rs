@@ -260,12 +260,12 @@ impl BlockKernel {
 }
 
 /// The contacts of [`BLOCKS`] blocks of [`BLOCK`] pairs on the common path (see the module's
-/// docs), block `b`'s pairs `pairs[4b..4b + 4]` to `contacts[b]`, by `kernel`, of which the
+/// docs), block `b`'s pairs the source's lanes `4b..4b + 4` to `contacts[b]`, by `kernel`, of which the
 /// first `filled` count (a block after theirs may be left unwritten): each lane's
 /// [`BlockContacts::lane`] is what [`grain_grain_hinted`] returns for that pair (always a
 /// contact there) and the hint it leaves, whichever the kernel; `None` where the pair leaves
 /// the path. Neither grain of a pair is a circle ([`LaneShape`]); `shifted`: j's centres are
-/// moved by the pairs' `j_shift` (a periodic cell's images). Out of line, so that the lanes
+/// moved by the lanes' shifts (a periodic cell's images). Out of line, so that the lanes
 /// stay in vector registers.
 #[inline(never)]
 pub fn grain_grain_blocks<P: LanePairs>(

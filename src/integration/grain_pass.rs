@@ -306,6 +306,10 @@ impl GrainPass<'_> {
             && std::arch::is_x86_feature_detected!("avx");
         #[cfg(not(target_arch = "x86_64"))]
         let lanes_gather = false;
+        // No grain's level may change and the box moves no grain: the chunk's part of what
+        // makes a block plain (below).
+        let level_and_box_still =
+            params.adaptive.is_none() && self.carry.is_none() && self.cell_motion.is_none();
         for start in (0..n).step_by(BLOCK_GRAINS) {
             let block = start..(start + BLOCK_GRAINS).min(n);
             // The states of the grains ahead, and the stress records they will write, as one by
@@ -422,11 +426,9 @@ impl GrainPass<'_> {
             // and the box moves no grain. Its sums are the loop's below, lane by lane in the
             // same order, without its tests (issue #16: the loop's sums, read and written
             // through memory grain by grain, were a tenth of this function's samples).
-            let plain = params.adaptive.is_none()
+            let plain = level_and_box_still
                 && outcome.suspect == 0
                 && wall_failure.is_none()
-                && self.carry.is_none()
-                && self.cell_motion.is_none()
                 && (!rigid || outcome.circle_frames);
             if let (true, Some(level)) = (plain, block_level) {
                 let totals = &mut sums.totals;
